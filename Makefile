@@ -1,0 +1,33 @@
+# Every target creates .venv idempotently; torch is pinned first so no CUDA build is pulled.
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+export OMP_NUM_THREADS ?= 1
+
+.PHONY: install demo test test-slow lint clean
+
+$(PY):
+	python3 -m venv $(VENV)
+
+$(STAMP): $(PY) pyproject.toml
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e ".[dev,ray]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m ovon.cli.main demo
+
+test: $(STAMP)
+	$(PY) -m pytest -q -x --durations=15
+
+test-slow: $(STAMP)
+	$(PY) -m pytest -q -m slow
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check ovon tests benchmarks
+
+clean:
+	rm -rf $(VENV) build *.egg-info

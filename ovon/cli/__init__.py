@@ -1,0 +1,1 @@
+"""The `ovon` command: thin parsers that call library functions and print."""
