@@ -1,0 +1,26 @@
+"""The agent protocol: what `ovon evaluate` drives, and what a researcher implements to plug in their own.
+
+    class MyAgent:
+        privileged = False            # True: observation["privileged"] carries ground truth (oracles only)
+        def reset(self, episode_info: dict) -> None: ...
+        def act(self, observation: dict) -> int: ...   # 0 STOP, 1 FORWARD, 2 LEFT, 3 RIGHT, 4 UP, 5 DOWN
+
+`episode_info` holds episode_id, scene_id, split, goal (text) and seed. `observation` holds rgb (H,W,3)
+uint8, depth (H,W) float32 metres, odometry (3,) float32 (forward m, left m, dyaw rad since the start),
+goal (str) — and "privileged" (`ovon.sim.env.Privileged`) only for agents that declare it.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+
+@runtime_checkable
+class Agent(Protocol):
+    def reset(self, episode_info: dict) -> None: ...
+
+    def act(self, observation: dict) -> int: ...
+
+
+def is_privileged(agent: object) -> bool:
+    return bool(getattr(agent, "privileged", False))

@@ -1,0 +1,150 @@
+"""Stretch-like agent kinematics on the navigability grid: the six actions of task.md, collisions,
+optional sliding, actuation noise, and odometry relative to the start pose.
+
+Collision model: forward motion is checked against the navigable (radius-eroded) grid by sampling the
+segment at half-cell steps. Without sliding the agent stops at the last navigable sample before the
+obstacle (Habitat's `tryStepNoSliding` stops at the contact too); with sliding the remaining motion is
+projected onto the x or z axis, whichever progresses further (a grid approximation of sliding along
+the navmesh edge). Either way the step reports `collided=True`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ovon.config.sim import AgentConfig
+from ovon.geometry import heading_vector, wrap_angle
+from ovon.sim.noise import ActuationNoise, OdometryNoise
+from ovon.sim.types import AgentState
+
+STOP, MOVE_FORWARD, TURN_LEFT, TURN_RIGHT, LOOK_UP, LOOK_DOWN = range(6)
+ACTION_NAMES = ("stop", "move_forward", "turn_left", "turn_right", "look_up", "look_down")
+
+
+@dataclass
+class StepResult:
+    state: AgentState
+    collided: bool
+
+
+class Kinematics:
+    """Applies actions to the true state on one floor's `NavGrid`."""
+
+    def __init__(self, grid, cfg: AgentConfig, actuation: ActuationNoise | None = None):
+        self.grid = grid
+        self.cfg = cfg
+        self.actuation = actuation
+
+    def step(self, state: AgentState, action: int, rng: np.random.Generator | None = None) -> StepResult:
+        s = state.copy()
+        cfg = self.cfg
+        if action == STOP:
+            return StepResult(s, False)
+        if action in (LOOK_UP, LOOK_DOWN):
+            delta = math.radians(cfg.look_angle_deg) * (1 if action == LOOK_UP else -1)
+            s.pitch = float(
+                np.clip(s.pitch + delta, math.radians(cfg.min_pitch_deg), math.radians(cfg.max_pitch_deg))
+            )
+            return StepResult(s, False)
+        if action in (TURN_LEFT, TURN_RIGHT):
+            sign = 1.0 if action == TURN_LEFT else -1.0
+            s.yaw = wrap_angle(s.yaw + sign * math.radians(cfg.turn_angle_deg))
+            if self.actuation is not None and rng is not None:
+                fwd, lat, dyaw = self.actuation.sample(rng, is_turn=True, turn_sign=sign)
+                s.yaw = wrap_angle(s.yaw + dyaw)
+                target = s.position + self._local_to_world(s.yaw, fwd, lat)
+                s.position, collided = self._move_to(s.position, target)
+                return StepResult(s, collided)
+            return StepResult(s, False)
+        if action == MOVE_FORWARD:
+            fwd, lat, dyaw = cfg.forward_step, 0.0, 0.0
+            if self.actuation is not None and rng is not None:
+                nf, nl, dyaw = self.actuation.sample(rng, is_turn=False)
+                fwd, lat = fwd + nf, lat + nl
+            target = s.position + self._local_to_world(s.yaw, fwd, lat)
+            s.position, collided = self._move_to(s.position, target)
+            s.yaw = wrap_angle(s.yaw + dyaw)
+            return StepResult(s, collided)
+        raise ValueError(f"unknown action {action!r}; valid actions are 0..5 ({', '.join(ACTION_NAMES)})")
+
+    @staticmethod
+    def _local_to_world(yaw: float, forward: float, lateral: float) -> np.ndarray:
+        f = heading_vector(yaw)
+        right = np.array([-f[2], 0.0, f[0]])  # forward rotated -90 deg about +y
+        return f * forward + right * lateral
+
+    def _free_prefix(self, start: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Last navigable point along start->target and whether the full segment was free."""
+        delta = target - start
+        dist = float(math.hypot(delta[0], delta[2]))
+        step = max(self.grid.cell_size * 0.5, 1e-3)
+        n = max(1, int(math.ceil(dist / step)))
+        last = start
+        for i in range(1, n + 1):
+            p = start + delta * (i / n)
+            if not self.grid.is_navigable(p):
+                return last, False
+            last = p
+        return last, True
+
+    def _move_to(self, start: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
+        reached, free = self._free_prefix(start, target)
+        if not free and self.cfg.allow_sliding:
+            rest = target - reached
+            best = reached
+            for axis in (0, 2):
+                slide = np.zeros(3)
+                slide[axis] = rest[axis]
+                cand, _ = self._free_prefix(reached, reached + slide)
+                if np.linalg.norm(cand - reached) > np.linalg.norm(best - reached):
+                    best = cand
+            reached = best
+        out = np.array(reached, dtype=np.float64)
+        r, c = self.grid.world_to_cell(out)
+        h = float(self.grid.heights[r, c])
+        if math.isfinite(h):
+            out[1] = h
+        return out, not free
+
+
+class Odometry:
+    """Pose relative to the start (dx, dz in the start frame, dyaw), optionally with per-step noise that
+    accumulates like real wheel odometry drift; the true pose is never changed by it."""
+
+    def __init__(self, noise: OdometryNoise | None = None):
+        self.noise = noise
+        self._start: AgentState | None = None
+        self._prev_true: AgentState | None = None
+        self._estimate = np.zeros(3)
+
+    def reset(self, start: AgentState) -> np.ndarray:
+        self._start = start.copy()
+        self._prev_true = start.copy()
+        self._estimate = np.zeros(3)
+        return self._estimate.copy()
+
+    def relative(self, state: AgentState) -> np.ndarray:
+        """True pose relative to the start: forward (m), left (m), dyaw (rad)."""
+        assert self._start is not None
+        d = state.position - self._start.position
+        f = heading_vector(self._start.yaw)
+        left = np.array([f[2], 0.0, -f[0]])
+        return np.array(
+            [float(d @ f), float(d @ left), wrap_angle(state.yaw - self._start.yaw)], dtype=np.float64
+        )
+
+    def update(self, state: AgentState, rng: np.random.Generator | None = None) -> np.ndarray:
+        assert self._prev_true is not None
+        true_now = self.relative(state)
+        true_prev = self.relative(self._prev_true)
+        step = true_now - true_prev
+        step[2] = wrap_angle(step[2])
+        if self.noise is not None and rng is not None and np.any(step != 0):
+            step = step + self.noise.sample(rng)
+        self._estimate = self._estimate + step
+        self._estimate[2] = wrap_angle(self._estimate[2])
+        self._prev_true = state.copy()
+        return self._estimate.copy()

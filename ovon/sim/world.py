@@ -1,0 +1,48 @@
+"""A loaded world = scene + navigability + renderer, built once per scene and reused across episodes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ovon.config.sim import SimConfig
+from ovon.scenes.model import Scene
+
+
+def load_scene_any(scene: str | Scene) -> Scene:
+    """A `Scene`, a path to an HM3DSem-layout scene (folder or file), or `procedural:<seed>`."""
+    if isinstance(scene, Scene):
+        return scene
+    if scene.startswith("procedural:"):
+        from ovon.scenes.procedural import generate_house
+
+        try:
+            seed = int(scene.split(":", 1)[1])
+        except ValueError:
+            raise ValueError(f"bad procedural scene id {scene!r}: expected procedural:<integer seed>") from None
+        return generate_house(seed)
+    from ovon.scenes.hm3dsem import load_scene
+
+    return load_scene(scene)
+
+
+@dataclass
+class World:
+    scene: Scene
+    nav: object  # ovon.sim.navgrid.SceneNav
+    renderer: object  # ovon.sim.types.Renderer
+    key: str
+
+    def close(self) -> None:
+        self.renderer.close()
+
+
+def build_world(scene: str | Scene, cfg: SimConfig) -> World:
+    from ovon.sim.navgrid import build_navigation
+
+    from ovon.sim.render import make_renderer
+
+    s = load_scene_any(scene)
+    nav = build_navigation(s, cfg.agent, cfg.nav)
+    renderer = make_renderer(s, cfg.camera)
+    key = scene if isinstance(scene, str) else s.scene_id
+    return World(s, nav, renderer, key)

@@ -1,0 +1,182 @@
+"""One episode's ground-truth bookkeeping: distance to goal, path length, collisions, success, SPL,
+SoftSPL and the failure label (task.md). Everything here uses the *true* pose, never noisy sensors.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ovon.config.task import TaskConfig
+
+FAILURE_LABELS = (
+    "timeout_missed_goal",
+    "timeout_ignored_goal",
+    "timeout_left_goal",
+    "stop_wrong_object",
+    "stop_too_far",
+    "stop_left_goal",
+    "stop_never_saw_goal",
+)
+
+
+@dataclass
+class Distractor:
+    """An instance of a category that is not a goal; used to detect STOP at a wrong object."""
+
+    instance_id: int
+    category: str
+    aabb_min: np.ndarray  # (3,)
+    aabb_max: np.ndarray  # (3,)
+
+    def floor_distance(self, p: np.ndarray) -> float:
+        """Distance on the floor plane from `p` to the box footprint (0 inside)."""
+        dx = max(self.aabb_min[0] - p[0], 0.0, p[0] - self.aabb_max[0])
+        dz = max(self.aabb_min[2] - p[2], 0.0, p[2] - self.aabb_max[2])
+        return math.hypot(dx, dz)
+
+
+@dataclass
+class EpisodeMetrics:
+    success: bool
+    spl: float
+    soft_spl: float
+    distance_to_goal: float
+    start_distance: float
+    path_length: float
+    steps: int
+    collisions: int
+    called_stop: bool
+    goal_seen: bool
+    failure: str | None  # one of FAILURE_LABELS, None on success
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class EpisodeTracker:
+    """Feed it the true position after every step (and the semantic frame for failure analysis)."""
+
+    distance_fn: object  # callable(position (3,)) -> geodesic distance to the nearest goal viewpoint
+    goal_ids: frozenset[int]
+    cfg: TaskConfig = field(default_factory=TaskConfig)
+    distractors: list[Distractor] = field(default_factory=list)
+
+    def reset(self, position: np.ndarray, semantic: np.ndarray | None = None) -> None:
+        self.position = np.asarray(position, dtype=np.float64).copy()
+        self.d0 = float(self.distance_fn(self.position))
+        self.distance = self.d0
+        self.prev_distance = self.d0
+        self.path_length = 0.0
+        self.steps = 0
+        self.collisions = 0
+        self.last_collided = False
+        self.called_stop = False
+        self.goal_seen = False
+        self.in_region = self.distance < self.cfg.success_distance
+        self.entered_region = self.in_region
+        self.left_region = False
+        self.seen_ids: set[int] = set()
+        self._goal_id_array = np.array(sorted(self.goal_ids), dtype=np.int64)
+        if semantic is not None:
+            self._observe(semantic)
+
+    @property
+    def done(self) -> bool:
+        return self.called_stop or self.steps >= self.cfg.max_steps
+
+    def _observe(self, semantic: np.ndarray) -> None:
+        flat = semantic.ravel()
+        counts = np.bincount(flat[flat > 0], minlength=1)
+        need = self.cfg.seen_fraction * flat.size
+        ids = np.nonzero(counts >= need)[0]
+        self.seen_ids.update(int(i) for i in ids)
+        if not self.goal_seen and len(self._goal_id_array):
+            g = self._goal_id_array[self._goal_id_array < len(counts)]
+            if counts[g].sum() >= need:
+                self.goal_seen = True
+
+    def update(
+        self, position: np.ndarray, stop: bool, collided: bool, semantic: np.ndarray | None = None
+    ) -> None:
+        """Record one step: the action taken (STOP or not) and the resulting true position."""
+        position = np.asarray(position, dtype=np.float64)
+        self.path_length += float(np.linalg.norm(position - self.position))
+        self.position = position.copy()
+        self.steps += 1
+        self.collisions += int(bool(collided))
+        self.last_collided = bool(collided)
+        self.prev_distance = self.distance
+        self.distance = float(self.distance_fn(position))
+        inside = self.distance < self.cfg.success_distance
+        if inside:
+            self.entered_region = True
+        elif self.in_region:
+            self.left_region = True
+        self.in_region = inside
+        if semantic is not None:
+            self._observe(semantic)
+        if stop:
+            self.called_stop = True
+
+    @property
+    def success(self) -> bool:
+        return self.called_stop and self.distance < self.cfg.success_distance
+
+    def reward(self) -> float:
+        """Reward of the last step (task.md): dense shaping or the sparse fine-tuning reward."""
+        r = self.cfg.reward
+        if r.kind == "dense":
+            if self.success:
+                return r.dense_success
+            delta = self.distance - self.prev_distance
+            if not math.isfinite(delta):
+                delta = 0.0
+            return -delta + r.dense_slack
+        if r.kind == "sparse":
+            collision = r.sparse_collision if self.last_collided else 0.0
+            return (r.sparse_success if self.success else 0.0) + r.sparse_slack + collision
+        raise ValueError(f"unknown reward kind {r.kind!r}; use dense or sparse")
+
+    def failure_label(self) -> str | None:
+        if self.success:
+            return None
+        if not self.called_stop:
+            if self.left_region:
+                return "timeout_left_goal"
+            # Inside the success region at timeout counts as "ignored": it had the goal, never stopped.
+            if self.goal_seen or self.entered_region:
+                return "timeout_ignored_goal"
+            return "timeout_missed_goal"
+        for d in self.distractors:
+            if d.instance_id in self.seen_ids and d.floor_distance(self.position) <= self.cfg.wrong_object_distance:
+                return "stop_wrong_object"
+        if self.left_region:
+            return "stop_left_goal"
+        if self.goal_seen:
+            return "stop_too_far"
+        return "stop_never_saw_goal"
+
+    def metrics(self) -> EpisodeMetrics:
+        d0, dt, L = self.d0, self.distance, self.path_length
+        if not math.isfinite(d0):
+            raise ValueError("the start is not connected to any goal viewpoint (distance is inf)")
+        eff = 1.0 if d0 <= 0 else d0 / max(d0, L)
+        success = self.success
+        progress = (1.0 if dt <= d0 else 0.0) if d0 <= 0 else max(0.0, 1.0 - dt / d0)
+        return EpisodeMetrics(
+            success=success,
+            spl=float(success) * eff,
+            soft_spl=progress * eff,
+            distance_to_goal=dt,
+            start_distance=d0,
+            path_length=L,
+            steps=self.steps,
+            collisions=self.collisions,
+            called_stop=self.called_stop,
+            goal_seen=self.goal_seen,
+            failure=self.failure_label(),
+        )

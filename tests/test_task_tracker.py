@@ -1,0 +1,166 @@
+"""Metrics and failure labels against hand-computed trajectories (task.md)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ovon.config.task import RewardConfig, TaskConfig
+from ovon.task.tracker import FAILURE_LABELS, Distractor, EpisodeTracker
+
+GOAL = 7  # goal instance id
+OTHER = 9  # a distractor instance id
+
+
+def straight_line_field(goal_x: float):
+    """Geodesic = |x - goal_x| along a corridor; viewpoint at x = goal_x."""
+    return lambda p: abs(float(p[0]) - goal_x)
+
+
+def frame(ids: dict[int, float] | None = None, size: int = 100) -> np.ndarray:
+    """A semantic frame where each id covers the given fraction of pixels."""
+    sem = np.zeros(size * size, dtype=np.int32)
+    start = 0
+    for i, frac in (ids or {}).items():
+        n = int(round(frac * sem.size))
+        sem[start : start + n] = i
+        start += n
+    return sem.reshape(size, size)
+
+
+def make(goal_x=3.0, max_steps=500, distractors=()):
+    return EpisodeTracker(
+        straight_line_field(goal_x), frozenset({GOAL}), TaskConfig(max_steps=max_steps), list(distractors)
+    )
+
+
+def walk(t, xs, stop_at_end, frames=None, collided=False):
+    for i, x in enumerate(xs):
+        last = i == len(xs) - 1
+        sem = frames[i] if frames is not None else None
+        t.update(np.array([x, 0.0, 0.0]), stop=stop_at_end and last, collided=collided, semantic=sem)
+
+
+def test_success_spl_is_shortest_over_actual_path():
+    t = make(goal_x=3.0)
+    t.reset(np.zeros(3))
+    # detour: 1 m backwards, then 4 m forward -> L = 1 + 4 = 5, d0 = 3, d_T = 0
+    walk(t, [-0.5, -1.0, 0.0, 1.0, 2.0, 3.0], stop_at_end=True)
+    m = t.metrics()
+    assert m.success and m.failure is None
+    assert m.path_length == pytest.approx(5.0)
+    assert m.spl == pytest.approx(3.0 / 5.0)
+    assert m.soft_spl == pytest.approx(3.0 / 5.0)
+    assert m.steps == 6
+
+
+def test_soft_spl_without_stop_and_failure():
+    t = make(goal_x=4.0, max_steps=2)
+    t.reset(np.zeros(3))
+    walk(t, [1.0, 2.0], stop_at_end=False)
+    assert t.done
+    m = t.metrics()
+    assert not m.success and m.spl == 0.0
+    # progress 1 - 2/4 = 0.5, efficiency d0/max(d0, L) = 4/4 = 1
+    assert m.soft_spl == pytest.approx(0.5)
+    assert m.failure == "timeout_missed_goal"
+
+
+def test_spl_uses_3d_displacement():
+    t = make(goal_x=1.0)
+    t.reset(np.zeros(3))
+    t.update(np.array([1.0, 1.0, 0.0]), stop=True, collided=False)  # climbs 1 m while moving 1 m
+    m = t.metrics()
+    assert m.path_length == pytest.approx(math.sqrt(2.0))
+    assert m.spl == pytest.approx(1.0 / math.sqrt(2.0))
+
+
+def test_stop_just_outside_region_fails():
+    t = make(goal_x=1.0)
+    t.reset(np.zeros(3))
+    t.update(np.array([0.74, 0.0, 0.0]), stop=True, collided=False)  # d = 0.26
+    assert not t.metrics().success
+    t2 = make(goal_x=1.0)
+    t2.reset(np.zeros(3))
+    t2.update(np.array([0.76, 0.0, 0.0]), stop=True, collided=False)  # d = 0.24
+    assert t2.metrics().success
+
+
+def test_collisions_counted():
+    t = make()
+    t.reset(np.zeros(3))
+    walk(t, [0.0, 0.0, 0.25], stop_at_end=False, collided=True)
+    assert t.metrics().collisions == 3
+
+
+# -- the seven failure labels, one scripted trajectory each ------------------------------------------
+def labelled(xs, stop, frames=None, max_steps=500, distractors=()):
+    t = make(goal_x=3.0, max_steps=max_steps if stop else len(xs), distractors=distractors)
+    t.reset(np.zeros(3), frame())
+    walk(t, xs, stop, frames)
+    return t.metrics().failure
+
+
+def test_timeout_missed_goal():
+    assert labelled([0.5, 1.0], stop=False, frames=[frame(), frame()]) == "timeout_missed_goal"
+
+
+def test_timeout_ignored_goal():
+    seen = frame({GOAL: 0.05})
+    assert labelled([0.5, 1.0], stop=False, frames=[seen, frame()]) == "timeout_ignored_goal"
+
+
+def test_goal_below_one_percent_is_not_seen():
+    barely = frame({GOAL: 0.005})
+    assert labelled([0.5, 1.0], stop=False, frames=[barely, barely]) == "timeout_missed_goal"
+
+
+def test_timeout_left_goal():
+    f = frame({GOAL: 0.1})
+    assert labelled([2.0, 3.0, 2.0], stop=False, frames=[f, f, f]) == "timeout_left_goal"
+
+
+def test_stop_wrong_object():
+    box = Distractor(OTHER, "toaster", np.array([0.8, 0.0, -0.2]), np.array([1.2, 0.5, 0.2]))
+    f = frame({OTHER: 0.2})
+    assert labelled([0.5, 1.0], stop=True, frames=[f, f], distractors=[box]) == "stop_wrong_object"
+
+
+def test_stop_near_unseen_distractor_is_not_wrong_object():
+    box = Distractor(OTHER, "toaster", np.array([0.8, 0.0, -0.2]), np.array([1.2, 0.5, 0.2]))
+    assert labelled([0.5, 1.0], stop=True, frames=[frame(), frame()], distractors=[box]) == "stop_never_saw_goal"
+
+
+def test_stop_too_far():
+    f = frame({GOAL: 0.1})
+    assert labelled([1.0, 2.0], stop=True, frames=[f, f]) == "stop_too_far"
+
+
+def test_stop_left_goal():
+    f = frame({GOAL: 0.1})
+    assert labelled([2.0, 3.0, 2.0, 1.5], stop=True, frames=[f] * 4) == "stop_left_goal"
+
+
+def test_stop_never_saw_goal():
+    assert labelled([0.5], stop=True, frames=[frame()]) == "stop_never_saw_goal"
+
+
+def test_labels_are_the_seven_of_task_md():
+    assert len(FAILURE_LABELS) == 7 and len(set(FAILURE_LABELS)) == 7
+
+
+def test_dense_and_sparse_rewards():
+    t = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL}), TaskConfig())
+    t.reset(np.zeros(3))
+    t.update(np.array([1.0, 0, 0]), stop=False, collided=False)
+    assert t.reward() == pytest.approx(1.0 - 0.01)
+    t.update(np.array([3.0, 0, 0]), stop=True, collided=False)
+    assert t.reward() == pytest.approx(2.5)
+    s = EpisodeTracker(
+        straight_line_field(3.0), frozenset({GOAL}), TaskConfig(reward=RewardConfig(kind="sparse"))
+    )
+    s.reset(np.zeros(3))
+    s.update(np.array([1.0, 0, 0]), stop=False, collided=False)
+    assert s.reward() == pytest.approx(-0.001)
+    s.update(np.array([1.0, 0, 0]), stop=False, collided=True)
+    assert s.reward() == pytest.approx(-0.001 - 0.003)
