@@ -36,6 +36,7 @@ class CameraConfig:
 class NavConfig:
     cell_size: float = 0.05
     cell_height: float = 0.05
+    max_slope_deg: float = 30.0
     floor_separation: float = 1.0  # walkable surfaces more than this apart in y are separate floors
 
 

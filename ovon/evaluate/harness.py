@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,6 +13,7 @@ from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
 from ovon.dataset.atomic import atomic_write_text
 from ovon.evaluate.results import RecordWriter, paper_table, read_records, record_key, summarize
+from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
 DEFAULT_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
@@ -90,23 +89,13 @@ def load_specs(data: str, scenes: str, split: str, limit: int | None) -> list[Ep
 _CACHE: dict = {}
 
 
-def _init_worker() -> None:
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    try:
-        import torch
-
-        torch.set_num_threads(1)
-    except ImportError:  # pragma: no cover
-        pass
-
-
 def run_unit(unit: dict) -> list[dict]:
     """Runs a chunk of episodes of one scene; env and agent are cached per process across chunks."""
     from ovon.agents import make_agent
     from ovon.evaluate.runner import run_episode
     from ovon.sim.env import ObjectNavEnv
 
-    _init_worker()
+    init_worker()
     key = (json.dumps(unit["sim"], sort_keys=True), json.dumps(unit["task"], sort_keys=True))
     if _CACHE.get("env_key") != key:
         if "env" in _CACHE:
@@ -152,36 +141,6 @@ def _units(cfg: EvalConfig, specs_by_split: dict[str, list[EpisodeSpec]], done: 
     return units
 
 
-def _execute(units: list[dict], cfg: EvalConfig) -> Iterable[list[dict]]:
-    if not units:
-        return
-    if cfg.executor == "ray":
-        import ray
-
-        if not ray.is_initialized():
-            ray.init(address=os.environ.get("RAY_ADDRESS") or None, include_dashboard=False)
-        remote = ray.remote(num_cpus=1)(run_unit)
-        pending = [remote.remote(u) for u in units]
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(ready[0])
-        return
-    if cfg.executor != "process":
-        raise ValueError(f"unknown executor {cfg.executor!r}: use process or ray")
-    if cfg.workers <= 1:
-        for u in units:
-            yield run_unit(u)
-        return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    ctx = mp.get_context("spawn")
-    with ProcessPoolExecutor(cfg.workers, mp_context=ctx, initializer=_init_worker) as pool:
-        futures = [pool.submit(run_unit, u) for u in units]
-        for f in as_completed(futures):
-            yield f.result()
-
-
 def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -195,21 +154,11 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
     total = sum(len(u["specs"]) for u in units)
     writer = RecordWriter(run_dir)
     try:
-        if progress and total:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
-
-            with Progress(
-                "[bold]{task.description}", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
-            ) as bar:
-                task = bar.add_task(f"evaluate {cfg.name or cfg.agent}", total=total)
-                for recs in _execute(units, cfg):
-                    for r in recs:
-                        writer.write(r)
-                    bar.advance(task, len(recs))
-        else:
-            for recs in _execute(units, cfg):
+        with progress_bar(f"evaluate {cfg.name or cfg.agent}", total, progress and total > 0) as bar:
+            for recs in run_jobs(run_unit, units, cfg.workers, cfg.executor):
                 for r in recs:
                     writer.write(r)
+                bar.advance(len(recs))
     finally:
         writer.close()
     return finalize(run_dir, cfg.name or cfg.agent)

@@ -59,7 +59,7 @@ def run_episode(env, agent, spec: EpisodeSpec, seed: int, record_path: bool = Fa
         "goal_seen": m["goal_seen"],
         "failure": m["failure"],
     }
+    record["actions"] = actions  # with the episode seed, enough to replay the episode exactly (videos)
     if record_path:
         record["path"] = path
-        record["actions"] = actions
     return record

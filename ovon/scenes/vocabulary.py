@@ -189,14 +189,14 @@ def parse_vocabulary(cats_doc: dict, map_doc: dict, source: str = "") -> Vocabul
             name = str(entry["name"]).strip().lower()
             family = str(entry["family"])
             if family not in FAMILIES:
-                raise ValueError(f"family {family!r} is not one of {sorted(FAMILIES)}")
+                raise ValueError(f"{where}: family {family!r} is not one of {sorted(FAMILIES)}")
             placement = entry["placement"]
             if placement not in ("floor", "surface", "wall", "ceiling"):
-                raise ValueError(f"placement {placement!r} must be floor/surface/wall/ceiling")
+                raise ValueError(f"{where}: placement {placement!r} must be floor/surface/wall/ceiling")
             rooms = {str(k): float(v) for k, v in dict(entry["rooms"]).items()}
             bad_rooms = set(rooms) - set(ROOM_TYPES)
             if bad_rooms:
-                raise ValueError(f"unknown room types {sorted(bad_rooms)}; valid: {list(ROOM_TYPES)}")
+                raise ValueError(f"{where}: unknown room types {sorted(bad_rooms)}; valid: {list(ROOM_TYPES)}")
             raw = tuple(dict.fromkeys([name, *[str(r).lower() for r in entry.get("raw_labels", [])]]))
             cat = Category(
                 name=name,

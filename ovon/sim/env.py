@@ -18,6 +18,7 @@ from gymnasium import spaces
 from ovon.config.base import merge, parse_overrides
 from ovon.config.sim import SimConfig
 from ovon.config.task import TaskConfig
+from ovon.scenes.model import Scene
 from ovon.sim.agent import STOP, Kinematics, Odometry
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState, Frame
@@ -28,6 +29,7 @@ from ovon.task.tracker import EpisodeTracker
 
 GOAL_CHARSET = string.ascii_letters + string.digits + " -_'/&().,"
 MAX_GOAL_LEN = 64
+ODOMETRY_LIMIT_M = 1000.0  # bound of the odometry Box (any building fits; check_env wants finite bounds)
 
 
 @dataclass
@@ -48,7 +50,7 @@ class ObjectNavEnv(gym.Env):
 
     def __init__(
         self,
-        scene: str | None = None,
+        scene: str | Scene | None = None,
         goal: str | None = None,
         episodes: list[EpisodeSpec] | None = None,
         sim: SimConfig | None = None,
@@ -69,7 +71,10 @@ class ObjectNavEnv(gym.Env):
         self.sim_cfg, self.task_cfg = sim, task
         self.privileged_obs = privileged
         self.render_mode = render_mode
-        self._scene_arg, self._goal_arg, self._start_arg = scene, goal, start
+        # A `Scene` object is kept here and looked up by its id (EpisodeSpec.scene is a string).
+        self._scene_obj = scene if isinstance(scene, Scene) else None
+        self._scene_arg = scene.scene_id if isinstance(scene, Scene) else scene
+        self._goal_arg, self._start_arg = goal, start
         self._episodes = list(episodes or [])
         self._episode_cursor = 0
         self._world: World | None = None
@@ -80,7 +85,12 @@ class ObjectNavEnv(gym.Env):
         obs = {
             "rgb": spaces.Box(0, 255, (cam.height, cam.width, 3), np.uint8),
             "depth": spaces.Box(0.0, cam.max_depth, (cam.height, cam.width), np.float32),
-            "odometry": spaces.Box(-np.inf, np.inf, (3,), np.float32),
+            "odometry": spaces.Box(
+                np.array([-ODOMETRY_LIMIT_M, -ODOMETRY_LIMIT_M, -math.pi], np.float32),
+                np.array([ODOMETRY_LIMIT_M, ODOMETRY_LIMIT_M, math.pi], np.float32),
+                (3,),
+                np.float32,
+            ),
             "goal": spaces.Text(MAX_GOAL_LEN, min_length=1, charset=GOAL_CHARSET),
         }
         if privileged:
@@ -94,7 +104,8 @@ class ObjectNavEnv(gym.Env):
         if self._world is None or self._world.key != scene:
             if self._world is not None:
                 self._world.close()
-            self._world = build_world(scene, self.sim_cfg)
+            obj = self._scene_obj
+            self._world = build_world(obj if obj is not None and obj.scene_id == scene else scene, self.sim_cfg)
         return self._world
 
     def _next_spec(self, options: dict | None) -> EpisodeSpec:

@@ -38,7 +38,6 @@ class World:
 
 def build_world(scene: str | Scene, cfg: SimConfig) -> World:
     from ovon.sim.navgrid import build_navigation
-
     from ovon.sim.render import make_renderer
 
     s = load_scene_any(scene)

@@ -1,0 +1,113 @@
+"""`ovon dataset generate | splits | stats | validate`."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("dataset", help="HM3D-OVON episode datasets: generate, split, inspect, validate")
+    dsub = p.add_subparsers(dest="dataset_command", required=True)
+
+    g = dsub.add_parser("generate", help="generate episodes for a scene dataset folder (train/ and val/)")
+    g.add_argument("--scenes", required=True, help="scene dataset folder holding train/ and val/")
+    g.add_argument("--out", required=True)
+    g.add_argument("--preset", choices=["paper", "fast"], default="fast")
+    g.add_argument("--split", action="append", help="only these splits (repeatable); default all four")
+    g.add_argument("--categories", help="an existing categories.json to reuse (from `ovon dataset splits`)")
+    g.add_argument("--config", help="YAML with GenerationConfig fields")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override, e.g. episodes_per_val_split=300 or viewpoints.render_size=128")
+    g.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    g.add_argument("--executor", choices=["process", "ray"], default="process")
+    g.add_argument("--no-progress", action="store_true")
+    g.set_defaults(func=cmd_generate)
+
+    s = dsub.add_parser("splits", help="category split by SentenceBERT similarity -> categories.json")
+    s.add_argument("--scenes", help="scene dataset folder: split the categories annotated in it")
+    s.add_argument("--vocabulary", action="store_true", help="split the whole embedded vocabulary instead")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--threshold", type=float, default=0.68)
+    s.add_argument("--holdout", type=float, default=0.25)
+    s.add_argument("--out", required=True, help="path of categories.json")
+    s.set_defaults(func=cmd_splits)
+
+    st = dsub.add_parser("stats", help="per-split numbers (Table 1/2 style)")
+    st.add_argument("data")
+    st.add_argument("--json", action="store_true", help="print JSON instead of tables")
+    st.set_defaults(func=cmd_stats)
+
+    v = dsub.add_parser("validate", help="schema + every start reachable within limits")
+    v.add_argument("data")
+    v.add_argument("--scenes", required=True)
+    v.add_argument("--split", action="append")
+    v.add_argument("--max-episodes-per-scene", type=int)
+    v.set_defaults(func=cmd_validate)
+
+
+def cmd_generate(args) -> int:
+    from ovon.config.base import build
+    from ovon.config.dataset import GENERATION_PRESETS, GenerationConfig
+    from ovon.dataset.generate import ALL_SPLITS, generate
+
+    cfg = build(GenerationConfig, GENERATION_PRESETS[args.preset](), args.config, args.set)
+    splits = tuple(args.split) if args.split else ALL_SPLITS
+    rep = generate(args.scenes, args.out, cfg, splits=splits, workers=args.workers, executor=args.executor,
+                   progress=not args.no_progress, category_split_path=args.categories)
+    n = sum(rep.episodes.values())
+    per_scene = rep.seconds / max(1, rep.scenes)
+    print(f"new episodes per split: {json.dumps(rep.episodes)}")
+    if rep.not_goal_reasons:
+        print(f"objects that are not goals: {dict(rep.not_goal_reasons)}")
+    if rep.rejections:
+        print(f"start rejections: {dict(rep.rejections)}")
+    print(f"{rep.scenes} scenes in {rep.seconds:.1f} s ({per_scene:.1f} s/scene"
+          + (f", {1000 * rep.seconds / n:.1f} s per 1000 episodes" if n else "") + f"); dataset: {args.out}")
+    return 0
+
+
+def cmd_splits(args) -> int:
+    from ovon.dataset.splits import SplitConfig, split_categories
+
+    if args.vocabulary == bool(args.scenes):
+        print("ovon dataset splits: give exactly one of --scenes DIR or --vocabulary", file=sys.stderr)
+        return 2
+    if args.vocabulary:
+        from ovon.scenes.vocabulary import load_vocabulary
+
+        cats = load_vocabulary().names
+    else:
+        from ovon.dataset.generate import discover_scenes, scene_categories
+
+        cats = sorted(set().union(*(scene_categories(r) for r in discover_scenes(args.scenes))))
+    cs = split_categories(cats, SplitConfig(seed=args.seed, holdout_fraction=args.holdout,
+                                            similarity_threshold=args.threshold))
+    cs.save(args.out)
+    for name in ("val_seen_synonyms", "val_unseen"):
+        rng = cs.similarity_range(name)
+        print(f"{name}: {len(cs.categories(name))} categories"
+              + (f", similarity [{rng[0]:.2f}, {rng[1]:.2f}]" if rng else ""))
+    print(f"train: {len(cs.categories('train'))} categories; written {Path(args.out)}")
+    return 0
+
+
+def cmd_stats(args) -> int:
+    from ovon.dataset.stats import dataset_stats, format_stats
+
+    stats = dataset_stats(args.data)
+    print(json.dumps(stats, indent=2) if args.json else format_stats(stats))
+    return 0
+
+
+def cmd_validate(args) -> int:
+    from ovon.dataset.validate import validate_dataset
+
+    rep = validate_dataset(args.data, args.scenes, args.split, max_episodes_per_scene=args.max_episodes_per_scene)
+    for e in rep.errors[:50]:
+        print(f"  {e}")
+    status = "OK" if rep.ok else f"{sum(rep.counts.values())} problem(s): {dict(rep.counts)}"
+    print(f"validated {rep.episodes} episodes in {rep.shards} shards: {status}")
+    return 0 if rep.ok else 1

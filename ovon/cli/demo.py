@@ -1,0 +1,55 @@
+"""`ovon demo` (`make demo`): the main job on the embedded world, end to end on a laptop CPU.
+
+Generates a small scene dataset and its val episodes if missing (fast preset), evaluates the random,
+shortest-path and frontier agents on the three val splits, prints the paper-style table and writes
+the report folder.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+AGENTS = ("random", "shortest-path", "frontier")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("demo", help="generate a small embedded dataset and benchmark the built-in agents")
+    p.add_argument("--root", default="data/demo", help="where scenes, episodes and runs go")
+    p.add_argument("--train-scenes", type=int, default=3)
+    p.add_argument("--val-scenes", type=int, default=3)
+    p.add_argument("--episodes", type=int, default=20, help="episodes per split and agent")
+    p.add_argument("--seeds", default="0,1")
+    p.add_argument("--workers", type=int, default=2)
+    p.set_defaults(func=cmd_demo)
+
+
+def cmd_demo(args) -> int:
+    from ovon.cli.main import main as ovon
+
+    t0 = time.perf_counter()
+    root = Path(args.root)
+    scenes, data, runs = root / "scenes", root / "episodes", root / "runs"
+    for split, count, seed in (("train", args.train_scenes, 1000), ("val", args.val_scenes, 2000)):
+        rc = ovon(["scenes", "generate", "--split", split, "--count", str(count), "--seed", str(seed),
+                   "--out", str(scenes), "--workers", str(args.workers)])
+        if rc:
+            return rc
+    gen = ["dataset", "generate", "--scenes", str(scenes), "--out", str(data), "--preset", "fast",
+           "--workers", str(args.workers), "--set", f"episodes_per_val_split={max(args.episodes, 30)}"]
+    for s in ("val_seen", "val_seen_synonyms", "val_unseen"):
+        gen += ["--split", s]
+    rc = ovon(gen)
+    if rc:
+        return rc
+    ovon(["dataset", "stats", str(data)])
+    for agent in AGENTS:
+        rc = ovon(["evaluate", "--agent", agent, "--data", str(data), "--scenes", str(scenes),
+                   "--seeds", args.seeds, "--episodes", str(args.episodes), "--workers", str(args.workers),
+                   "--out", str(runs / agent)])
+        if rc:
+            return rc
+    report = runs / "report"
+    rc = ovon(["report", *[str(runs / a) for a in AGENTS], "--out", str(report)])
+    print(f"demo finished in {time.perf_counter() - t0:.0f} s; report: {report / 'report.md'}")
+    return rc

@@ -1,0 +1,190 @@
+"""`ovon scenes ...`: generate procedural houses in the HM3D layout, inspect a scene, draw it from above,
+list the vocabulary."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+# House seeds: seed * SEED_STRIDE + split base + index, so the default seed gives HM3D-like five-digit
+# scene ids (train 00000.., val 80000..) and different dataset seeds never share a house.
+SEED_STRIDE = 100_000
+SPLIT_BASE = {"train": 0, "val": 80_000}
+SPLIT_CAPACITY = {"train": 80_000, "val": 20_000}
+
+
+def house_seed(seed: int, split: str, index: int) -> int:
+    """Seed of house `index` of `split`: deterministic from (seed, split, index); train and val differ,
+    and a larger --count keeps the earlier houses."""
+    if split not in SPLIT_BASE:
+        raise ValueError(f"unknown split {split!r}; valid: {sorted(SPLIT_BASE)}")
+    if not 0 <= index < SPLIT_CAPACITY[split]:
+        raise ValueError(
+            f"{split} holds at most {SPLIT_CAPACITY[split]} houses per seed, index {index} is out of range"
+        )
+    if seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {seed}")
+    return int(seed) * SEED_STRIDE + SPLIT_BASE[split] + int(index)
+
+
+def _done_seeds(split_dir: Path) -> dict[int, str]:
+    """Seeds already written under `split_dir` (the sidecar is written last, so its presence means done)."""
+    done: dict[int, str] = {}
+    if not split_dir.is_dir():
+        return done
+    for side in split_dir.glob("*/*.ovon.json"):
+        try:
+            meta = json.loads(side.read_text()).get("meta") or {}
+        except (OSError, ValueError):
+            continue
+        stem = side.name[: -len(".ovon.json")]
+        complete = all((side.parent / f"{stem}{s}").is_file() for s in (".glb", ".semantic.glb", ".semantic.txt"))
+        if complete and "house_seed" in meta:
+            done[int(meta["house_seed"])] = side.parent.name
+    return done
+
+
+def _generate_one(job: tuple[int, int, str, str]) -> tuple[int, int, str, int, float]:
+    """Worker: generate one house and write it. Returns (index, seed, scene_id, n_objects, seconds)."""
+    index, seed, split, split_dir = job
+    from ovon.scenes.hm3dsem import write_scene
+    from ovon.scenes.procedural import generate_house
+
+    t0 = time.perf_counter()
+    scene = generate_house(seed)
+    if not scene.source:
+        scene.source = f"procedural:{seed}"
+    folder = Path(split_dir) / scene.scene_id
+    side = folder / f"{scene.scene_id.split('-', 1)[-1]}.ovon.json"
+    if side.is_file():
+        other = (json.loads(side.read_text()).get("meta") or {}).get("house_seed")
+        if other is not None and int(other) != seed:
+            raise ValueError(
+                f"scene id {scene.scene_id} of house seed {seed} collides with the one of seed {other} in {folder}"
+            )
+    meta = {"house_seed": seed, "split": split, "index": index}
+    write_scene(scene, folder, meta=meta)
+    return index, seed, scene.scene_id, len(scene.objects), time.perf_counter() - t0
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from ovon.parallel import progress_bar, run_jobs
+
+    console = Console()
+    if args.count < 0:
+        raise ValueError(f"--count must be >= 0, got {args.count}")
+    split_dir = Path(args.out) / args.split
+    split_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    done = _done_seeds(split_dir)
+    jobs = []
+    for i in range(args.count):
+        s = house_seed(args.seed, args.split, i)
+        if s not in done:
+            jobs.append((i, s, args.split, str(split_dir)))
+    skipped = args.count - len(jobs)
+    workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
+    workers = max(1, min(workers, len(jobs) or 1))
+    console.print(
+        f"generating {len(jobs)} {args.split} houses into {split_dir} "
+        f"({skipped} already there, {workers} worker{'s' if workers > 1 else ''})"
+    )
+    results = []
+    with progress_bar(f"scenes/{args.split}", total=len(jobs)) as bar:
+        for res in run_jobs(_generate_one, jobs, workers=workers):
+            results.append(res)
+            bar.advance(1)
+    elapsed = time.perf_counter() - t0
+    if results:
+        per = np.mean([r[4] for r in results])
+        n_obj = np.mean([r[3] for r in results])
+        console.print(f"mean per house: {per:.2f} s, {n_obj:.0f} objects")
+    console.print(f"done: {len(results)} written, {skipped} skipped, in {elapsed:.1f} s")
+    return 0
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from ovon.scenes.hm3dsem import load_scene
+    from ovon.scenes.inspect import print_summary, summarize
+
+    summary = summarize(load_scene(args.path))
+    if args.json:
+        print(json.dumps(summary, indent=1))
+    else:
+        print_summary(summary)
+    return 0
+
+
+def cmd_render_topdown(args: argparse.Namespace) -> int:
+    from ovon.scenes.hm3dsem import load_scene
+    from ovon.scenes.topdown import render_topdown
+
+    out = render_topdown(load_scene(args.path), args.out, floor=args.floor)
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from ovon.scenes.hm3dsem import list_scenes
+
+    for p in list_scenes(args.dataset_dir, args.split):
+        print(p)
+    return 0
+
+
+def cmd_vocabulary(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from ovon.scenes.vocabulary import load_vocabulary
+
+    vocab = load_vocabulary()
+    table = Table(title="Vocabulary")
+    for col in ("name", "family", "placement", "raw labels"):
+        table.add_column(col)
+    for name in vocab.names:
+        c = vocab[name]
+        table.add_row(c.name, c.family, c.placement, ", ".join(r for r in c.raw_labels if r != c.name))
+    console = Console()
+    console.print(table)
+    console.print(f"{len(vocab)} categories, {len({c.family for c in vocab.categories.values()})} shape families")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("scenes", help="generate, inspect and draw scenes")
+    sub = p.add_subparsers(dest="scenes_command", required=True)
+
+    g = sub.add_parser("generate", help="write procedural houses in the HM3D layout DIR/<split>/<NNNNN-id>/")
+    g.add_argument("--split", choices=sorted(SPLIT_BASE), default="train")
+    g.add_argument("--count", type=int, required=True, help="number of houses in the split")
+    g.add_argument("--seed", type=int, default=0, help="dataset seed; house seeds derive from it")
+    g.add_argument("--out", required=True, help="dataset folder (DATASET_DIR)")
+    g.add_argument("--workers", type=int, default=None, help="worker processes (default: min(2, cpus))")
+    g.set_defaults(func=cmd_generate)
+
+    i = sub.add_parser("inspect", help="print a summary of one scene (folder or any of its files)")
+    i.add_argument("path")
+    i.add_argument("--json", action="store_true", help="print the summary as JSON")
+    i.set_defaults(func=cmd_inspect)
+
+    r = sub.add_parser("render-topdown", help="draw one scene from above (one panel per floor)")
+    r.add_argument("path")
+    r.add_argument("--out", required=True, help="PNG file to write")
+    r.add_argument("--floor", type=int, default=None, help="only this floor index")
+    r.set_defaults(func=cmd_render_topdown)
+
+    ls = sub.add_parser("list", help="list the scene folders of a dataset tree")
+    ls.add_argument("dataset_dir")
+    ls.add_argument("--split", default=None)
+    ls.set_defaults(func=cmd_list)
+
+    v = sub.add_parser("vocabulary", help="print the categories (name, family, placement)")
+    v.set_defaults(func=cmd_vocabulary)

@@ -1,0 +1,363 @@
+"""`ovon dataset generate`: goal objects, viewpoints and starts for every scene of a scene dataset,
+written as HM3D-OVON splits (train, val_seen, val_seen_synonyms, val_unseen).
+
+Pipeline (one job per scene, in worker processes or Ray tasks):
+1. categories present in the scenes (semantic.txt labels through the cleaning table) -> category split
+   (`categories.json`, SentenceBERT similarity; reused when it already exists in the output);
+2. per scene: navigability, then every candidate object's viewpoints rendered with the generation rig;
+   the goals are cached (`.cache/goals/<scene>.json.gz`) so val allocation can see all val scenes;
+3. per scene and split: episodes allocated (train: uniform over the scene's categories; val: each
+   split's budget spread over (scene, category) pairs, i.e. over categories in proportion to how many
+   scenes contain them), starts sampled, the shard written atomically.
+A re-run skips every file already written; the same seed gives byte-identical shards.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import time
+import zlib
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ovon.config.base import from_dict, to_dict
+from ovon.config.dataset import GenerationConfig
+from ovon.config.sim import AgentConfig, CameraConfig, NavConfig
+from ovon.dataset.atomic import atomic_write_text, write_json_gz
+from ovon.dataset.io import shard_exists, write_scene_shard, write_split_shell
+from ovon.dataset.records import Episode, ObjectGoal, ViewPoint, goal_key
+from ovon.geometry import yaw_to_quat
+
+VAL_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
+ALL_SPLITS = ("train", *VAL_SPLITS)
+
+
+@dataclass
+class SceneRef:
+    folder: str  # scene folder on disk
+    stem: str  # file stem = shard name, e.g. "TEEsavR23oF"
+    scene_id: str  # episode scene_id: <dataset>/<split>/<NNNNN-id>/<stem>.glb
+    kind: str  # "train" | "val" (scene split)
+
+
+def discover_scenes(scenes_dir: str | Path) -> list[SceneRef]:
+    from ovon.scenes.hm3dsem import find_scene_files, list_scenes
+
+    root = Path(scenes_dir)
+    refs = []
+    for kind in ("train", "val"):
+        if not (root / kind).is_dir():
+            continue
+        for folder in list_scenes(root, kind):
+            files = find_scene_files(folder)
+            rel = f"{root.name}/{kind}/{folder.name}/{files['visual'].name}"
+            refs.append(SceneRef(str(folder), files["stem"], rel, kind))
+    if not refs:
+        raise FileNotFoundError(
+            f"no scenes under {root}: expected {root}/train/<NNNNN-id>/ and {root}/val/<NNNNN-id>/ "
+            "(make some with `ovon scenes generate`)"
+        )
+    return refs
+
+
+def scene_categories(ref: SceneRef) -> set[str]:
+    """Canonical categories annotated in a scene, from its semantic.txt (cheap: no mesh loading)."""
+    from ovon.scenes.hm3dsem import find_scene_files, parse_semantic_txt
+    from ovon.scenes.vocabulary import load_vocabulary
+
+    vocab = load_vocabulary()
+    txt = find_scene_files(ref.folder)["semantic_txt"]
+    if txt is None:
+        raise FileNotFoundError(f"scene {ref.folder} has no .semantic.txt: it cannot give goal categories")
+    return {c for e in parse_semantic_txt(txt) if (c := vocab.clean(e.raw_label))}
+
+
+def _rng(seed: int, *parts: str) -> np.random.Generator:
+    return np.random.default_rng([seed, zlib.crc32("|".join(parts).encode())])
+
+
+def _r(v, nd: int) -> list[float]:
+    return [round(float(x), nd) for x in v]
+
+
+# -- phase 1: goals of one scene ----------------------------------------------------------------
+def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str]) -> dict:
+    """{category: [goal dict]} for the scene plus the reasons objects were not goals."""
+    from ovon.dataset.viewpoints import object_viewpoints
+    from ovon.sim.navgrid import build_navigation
+    from ovon.sim.render import make_renderer
+    from ovon.sim.world import load_scene_any
+
+    scene = load_scene_any(ref.folder)
+    nav = build_navigation(scene, AgentConfig(), NavConfig())
+    vc = cfg.viewpoints
+    cam = CameraConfig(width=vc.render_size, height=vc.render_size, hfov_deg=vc.hfov_deg,
+                       camera_height=vc.camera_height, backend=vc.backend)  # type: ignore[arg-type]
+    renderer = make_renderer(scene, cam)
+    wanted = set(categories)
+    reasons: Counter = Counter()
+    goals: dict[str, list[dict]] = {}
+    nd = cfg.decimals
+    try:
+        for obj in sorted(scene.objects, key=lambda o: o.id):
+            if obj.category is None or obj.category not in wanted:
+                continue
+            grid = nav.grid_for(obj.aabb_min)
+            vps, why = object_viewpoints(obj, grid, renderer, vc)
+            if why is None:
+                # Reachable = on an island where starts can be sampled.
+                big = grid.island_radius >= cfg.starts.min_island_radius
+                vps = [v for v in vps if (i := grid.island_of(v.position)) >= 0 and big[i]]
+                if not vps:
+                    why = "unreachable"
+            if why is not None:
+                reasons[why] += 1
+                continue
+            goals.setdefault(obj.category, []).append(
+                {
+                    "object_category": obj.category,
+                    "object_id": obj.name,
+                    "position": _r(obj.center, nd),
+                    "floor": int(grid.floor),
+                    "view_points": [
+                        {"position": _r(v.position, nd), "rotation": _r(v.rotation(), nd), "iou": round(v.score, nd)}
+                        for v in vps
+                    ],
+                }
+            )
+    finally:
+        renderer.close()
+    return {"goals": goals, "not_goal_reasons": dict(sorted(reasons.items()))}
+
+
+def _goal_cache_path(out: Path, ref: SceneRef) -> Path:
+    return out / ".cache" / "goals" / f"{ref.kind}-{ref.stem}.json.gz"
+
+
+def goals_job(job: dict) -> dict:
+    ref = SceneRef(**job["ref"])
+    out = Path(job["out"])
+    path = _goal_cache_path(out, ref)
+    if path.exists():
+        return {"stem": ref.stem, "cached": True}
+    _nav_cache(out)
+    t0 = time.perf_counter()
+    res = compute_goals(ref, from_dict(GenerationConfig, job["cfg"]), job["categories"])
+    res["seconds"] = round(time.perf_counter() - t0, 3)
+    write_json_gz(path, res)
+    return {"stem": ref.stem, "cached": False, "seconds": res["seconds"]}
+
+
+def load_goal_cache(out: Path, ref: SceneRef) -> dict:
+    with gzip.open(_goal_cache_path(out, ref), "rt", encoding="utf-8") as f:
+        return json.load(f)
+
+
+def _nav_cache(out: Path) -> None:
+    import os
+
+    os.environ.setdefault("OVON_CACHE_DIR", str(out / ".cache" / "nav"))
+
+
+# -- phase 2: episodes of one scene and split ----------------------------------------------------
+def episodes_job(job: dict) -> dict:
+    """Sample the allocated episodes of one (scene, split) and write its shard."""
+    from ovon.dataset.starts import sample_start
+    from ovon.sim.geodesic import distance_field
+    from ovon.sim.navgrid import build_navigation
+    from ovon.sim.world import load_scene_any
+
+    ref = SceneRef(**job["ref"])
+    out, split = Path(job["out"]), job["split"]
+    if shard_exists(out, split, ref.stem):
+        return {"stem": ref.stem, "split": split, "cached": True}
+    _nav_cache(out)
+    cfg = from_dict(GenerationConfig, job["cfg"])
+    goals: dict[str, list[dict]] = load_goal_cache(out, ref)["goals"]
+    alloc: dict[str, int] = job["allocation"]
+    children: dict[str, list[str]] = job["children"]
+    rng = _rng(cfg.seed, "starts", split, ref.stem)
+    reasons: Counter = Counter()
+    t0 = time.perf_counter()
+    episodes: list[Episode] = []
+    used: set[str] = set()
+    nav = None
+    if any(alloc.values()):
+        nav = build_navigation(load_scene_any(ref.folder), AgentConfig(), NavConfig())
+    # Round-robin over categories so a truncated list still covers all of them.
+    queue = {c: n for c, n in sorted(alloc.items()) if n > 0}
+    per_cat: dict[str, tuple] = {}
+    for cat in queue:
+        cats = [cat, *[c for c in children.get(cat, []) if c in goals]]
+        main_floor = Counter(g["floor"] for g in goals[cat]).most_common(1)[0][0]
+        vps = np.array([vp["position"] for c in cats for g in goals[c] if g["floor"] == main_floor
+                        for vp in g["view_points"]], dtype=np.float64)
+        grid = nav.floors[main_floor]
+        per_cat[cat] = (cats, grid, distance_field(grid, vps), vps)
+    dropped = set()
+    while queue:
+        for cat in list(queue):
+            cats, grid, fld, vps = per_cat[cat]
+            start = sample_start(grid, fld, vps, cfg.starts, rng, reasons)
+            if start is None:
+                reasons["category_without_start"] += 1
+                dropped.add(cat)
+                del queue[cat]
+                continue
+            nd = cfg.decimals
+            episodes.append(
+                Episode(
+                    episode_id=str(len(episodes)),
+                    scene_id=ref.scene_id,
+                    start_position=_r(start.position, nd),
+                    start_rotation=_r(yaw_to_quat(start.yaw), nd),
+                    object_category=cat,
+                    info={"geodesic_distance": round(start.geodesic, nd),
+                          "euclidean_distance": round(start.euclidean, nd)},
+                    children_object_categories=cats[1:],
+                )
+            )
+            used.update(cats)
+            queue[cat] -= 1
+            if queue[cat] == 0:
+                del queue[cat]
+    base = Path(ref.scene_id).name
+    gbc = {
+        goal_key(base, c): [
+            ObjectGoal(g["object_category"], g["object_id"], g["position"],
+                       [ViewPoint(vp["position"], vp["rotation"], vp["iou"]) for vp in g["view_points"]])
+            for g in goals[c]
+        ]
+        for c in sorted(used)
+    }
+    write_scene_shard(out, split, ref.stem, episodes, gbc)
+    return {
+        "stem": ref.stem, "split": split, "cached": False, "episodes": len(episodes),
+        "seconds": round(time.perf_counter() - t0, 3), "rejections": dict(reasons),
+        "dropped_categories": sorted(dropped),
+    }
+
+
+# -- allocation ------------------------------------------------------------------------------------
+def largest_remainder(total: int, keys: list, weights: list[float] | None = None) -> dict:
+    """Split `total` over keys in proportion to weights, integers summing exactly to total."""
+    if not keys:
+        return {}
+    w = np.ones(len(keys)) if weights is None else np.asarray(weights, dtype=np.float64)
+    quota = total * w / w.sum()
+    base = np.floor(quota).astype(int)
+    rest = total - int(base.sum())
+    order = sorted(range(len(keys)), key=lambda i: (-(quota[i] - base[i]), i))
+    for i in order[:rest]:
+        base[i] += 1
+    return {k: int(n) for k, n in zip(keys, base)}
+
+
+@dataclass
+class GenerationReport:
+    seconds: float = 0.0
+    scenes: int = 0
+    episodes: dict = field(default_factory=dict)
+    not_goal_reasons: Counter = field(default_factory=Counter)
+    rejections: Counter = field(default_factory=Counter)
+    dropped: list = field(default_factory=list)
+    goal_seconds: list = field(default_factory=list)
+
+
+def generate(
+    scenes_dir: str | Path,
+    out: str | Path,
+    cfg: GenerationConfig,
+    splits: tuple[str, ...] = ALL_SPLITS,
+    workers: int = 1,
+    executor: str = "process",
+    progress: bool = True,
+    category_split_path: str | Path | None = None,
+) -> GenerationReport:
+    from ovon.dataset.splits import SplitConfig, children_map, load_category_split, split_categories
+    from ovon.models.text_minilm import default_text_encoder
+    from ovon.parallel import progress_bar, run_jobs
+    from ovon.scenes.vocabulary import load_vocabulary
+
+    bad = [s for s in splits if s not in ALL_SPLITS]
+    if bad:
+        raise ValueError(f"unknown split(s) {bad}; choose from {list(ALL_SPLITS)}")
+    t0 = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    refs = discover_scenes(scenes_dir)
+    cats_by_scene = {r.stem: scene_categories(r) for r in refs}
+    cat_path = Path(category_split_path) if category_split_path else out / "categories.json"
+    if cat_path.exists():
+        csplit = load_category_split(cat_path)
+    else:
+        all_cats = sorted(set().union(*cats_by_scene.values()))
+        sc = cfg.splits
+        csplit = split_categories(all_cats, SplitConfig(seed=sc.seed, holdout_fraction=sc.holdout_fraction,
+                                                        similarity_threshold=sc.similarity_threshold))
+        csplit.save(cat_path)
+    if cat_path != out / "categories.json":
+        csplit.save(out / "categories.json")
+    split_cats = {s: csplit.categories(s) for s in ALL_SPLITS}
+    vocab, enc = load_vocabulary(), default_text_encoder()
+    children = {
+        s: (children_map(split_cats[s], vocab, enc, cfg.splits.similarity_threshold) if cfg.splits.children else {})
+        for s in splits
+    }
+    atomic_write_text(out / "generation_config.json", json.dumps(to_dict(cfg), indent=2, sort_keys=True))
+    report = GenerationReport(scenes=len(refs))
+    cfg_d = to_dict(cfg)
+    kinds = {"train"} if splits == ("train",) else ({"val"} if "train" not in splits else {"train", "val"})
+    active = [r for r in refs if r.kind in kinds]
+    wanted = sorted(set().union(*(split_cats[s] for s in splits)))
+
+    # phase 1: goals
+    jobs = [{"ref": r.__dict__, "out": str(out), "cfg": cfg_d, "categories": wanted} for r in active]
+    with progress_bar("goals + viewpoints (scenes)", len(jobs), progress) as bar:
+        for res in run_jobs(goals_job, jobs, workers, executor):
+            if not res["cached"]:
+                report.goal_seconds.append(res["seconds"])
+            bar.advance()
+    goals = {r.stem: load_goal_cache(out, r) for r in active}
+    for g in goals.values():
+        report.not_goal_reasons.update(g["not_goal_reasons"])
+
+    # phase 2: allocation + starts
+    ep_jobs = []
+    for split in splits:
+        kind = "train" if split == "train" else "val"
+        scene_refs = [r for r in active if r.kind == kind]
+        eligible = {r.stem: sorted(c for c in split_cats[split] if c in goals[r.stem]["goals"]) for r in scene_refs}
+        if split == "train":
+            allocs = {s: largest_remainder(cfg.episodes_per_train_scene, cs) for s, cs in eligible.items()}
+        else:
+            pairs = [(s, c) for s, cs in sorted(eligible.items()) for c in cs]
+            flat = largest_remainder(cfg.episodes_per_val_split, pairs)
+            allocs = {s: {c: flat[(s, c)] for c in cs} for s, cs in eligible.items()}
+        for r in scene_refs:
+            ep_jobs.append({"ref": r.__dict__, "out": str(out), "cfg": cfg_d, "split": split,
+                            "allocation": allocs[r.stem], "children": children[split]})
+        write_split_shell(out, split)
+    with progress_bar("episodes (scene x split)", len(ep_jobs), progress) as bar:
+        for res in run_jobs(episodes_job, ep_jobs, workers, executor):
+            if not res["cached"]:
+                report.episodes[res["split"]] = report.episodes.get(res["split"], 0) + res["episodes"]
+                report.rejections.update(res["rejections"])
+                report.dropped += [(res["stem"], res["split"], c) for c in res["dropped_categories"]]
+            bar.advance()
+    report.seconds = time.perf_counter() - t0
+    summary = {
+        "seconds": round(report.seconds, 2),
+        "scenes": report.scenes,
+        "new_episodes": report.episodes,
+        "objects_not_goals": dict(report.not_goal_reasons),
+        "start_rejections": dict(report.rejections),
+        "dropped_categories": report.dropped,
+        "goal_seconds_per_scene": report.goal_seconds,
+    }
+    atomic_write_text(out / "generation_report.json", json.dumps(summary, indent=2, sort_keys=True))
+    return report

@@ -1,0 +1,62 @@
+"""Start poses (dataset.md, "Starts"): every rejection is counted by reason so a thin dataset explains
+itself."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from ovon.config.dataset import StartConfig
+
+REJECTION_REASONS = (
+    "unreachable",
+    "too_close",
+    "too_far",
+    "ratio_below_min",
+    "ratio_rejected",
+    "multi_floor_path",
+)
+
+
+@dataclass
+class Start:
+    position: np.ndarray
+    yaw: float
+    geodesic: float
+    euclidean: float
+
+
+def sample_start(
+    grid, field, viewpoints: np.ndarray, cfg: StartConfig, rng: np.random.Generator, reasons: Counter
+) -> Start | None:
+    """One start for a goal set (all viewpoints of the category and its children on this floor)."""
+    for _ in range(cfg.max_tries):
+        p = grid.random_point(rng, cfg.min_island_radius)
+        d = field.distance(p)
+        if not math.isfinite(d):
+            reasons["unreachable"] += 1
+            continue
+        if d < cfg.min_geodesic:
+            reasons["too_close"] += 1
+            continue
+        if d > cfg.max_geodesic:
+            reasons["too_far"] += 1
+            continue
+        euclid = float(np.min(np.linalg.norm(viewpoints - p, axis=1)))
+        ratio = d / max(euclid, 1e-6)
+        if ratio < cfg.min_geo_euclid_ratio:
+            reasons["ratio_below_min"] += 1
+            continue
+        # PointNav-style: paths that are nearly straight lines are kept only sometimes.
+        if cfg.pointnav_ratio_rejection and ratio < 1.1 and rng.random() > 20.0 * (ratio - 0.98) ** 2:
+            reasons["ratio_rejected"] += 1
+            continue
+        path = field.path(p)
+        if len(path) and float(np.ptp(path[:, 1])) > cfg.max_height_span:
+            reasons["multi_floor_path"] += 1
+            continue
+        return Start(p, float(rng.uniform(-math.pi, math.pi)), d, euclid)
+    return None

@@ -1,0 +1,91 @@
+"""`ovon dataset stats`: the paper's Table 1/2-style numbers for a generated or released dataset."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from ovon.dataset.io import EpisodeDataset
+
+HIST_EDGES = (0, 2, 4, 6, 8, 10, 15, 20, 30)
+
+
+def split_stats(root: str | Path, split: str) -> dict:
+    ds = EpisodeDataset(root, split)
+    episodes = 0
+    cats: Counter = Counter()
+    instances: set[tuple[str, str]] = set()
+    geo: list[float] = []
+    scenes_with_eps = 0
+    scene_cats: Counter = Counter()
+    for scene, shard in ds.iter_scenes():
+        n = len(shard.episodes)
+        episodes += n
+        scenes_with_eps += n > 0
+        for ep in shard.episodes:
+            cats[ep.object_category] += 1
+            g = (ep.info or {}).get("geodesic_distance")
+            if g is not None:
+                geo.append(float(g))
+        for goals in shard.goals_by_category.values():
+            for g in goals:
+                instances.add((scene, g.object_id))
+        for c in {ep.object_category for ep in shard.episodes}:
+            scene_cats[c] += 1
+    hist, _edges = np.histogram(geo, bins=HIST_EDGES) if geo else (np.zeros(len(HIST_EDGES) - 1, int), None)
+    return {
+        "scenes": len(ds.scenes()),
+        "scenes_with_episodes": scenes_with_eps,
+        "episodes": episodes,
+        "categories": len(cats),
+        "goal_instances": len(instances),
+        "episodes_per_category": dict(sorted(cats.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "geodesic_distance": {
+            "mean": float(np.mean(geo)) if geo else float("nan"),
+            "min": float(np.min(geo)) if geo else float("nan"),
+            "max": float(np.max(geo)) if geo else float("nan"),
+            "histogram_edges_m": list(HIST_EDGES),
+            "histogram": [int(x) for x in hist],
+        },
+    }
+
+
+def dataset_stats(root: str | Path) -> dict:
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"dataset folder {root} does not exist")
+    splits = [d.name for d in sorted(root.iterdir()) if d.is_dir() and (d / "content").is_dir()]
+    if not splits:
+        raise FileNotFoundError(f"{root} holds no split folders (<split>/content/*.json.gz)")
+    out: dict = {"splits": {s: split_stats(root, s) for s in splits}}
+    cat_file = root / "categories.json"
+    if cat_file.exists():
+        doc = json.loads(cat_file.read_text())
+        for s in ("val_seen_synonyms", "val_unseen"):
+            sims = [h["max_similarity"] for h in doc.get(s, [])]
+            if sims:
+                out.setdefault("category_split", {})[s] = {
+                    "categories": len(sims), "similarity_min": min(sims), "similarity_max": max(sims)
+                }
+        out.setdefault("category_split", {})["train"] = {"categories": len(doc.get("train", []))}
+    return out
+
+
+def format_stats(stats: dict) -> str:
+    lines = ["| split | scenes | episodes | categories | goal instances | mean geodesic (m) | geodesic histogram |",
+             "|---|---|---|---|---|---|---|"]
+    for s, st in stats["splits"].items():
+        g = st["geodesic_distance"]
+        edges = g["histogram_edges_m"]
+        hist = " ".join(f"{a}-{b}:{n}" for a, b, n in zip(edges, edges[1:], g["histogram"]))
+        lines.append(f"| {s} | {st['scenes']} | {st['episodes']} | {st['categories']} | {st['goal_instances']} "
+                     f"| {g['mean']:.2f} | {hist} |")
+    if "category_split" in stats:
+        lines += ["", "| category split | categories | similarity range |", "|---|---|---|"]
+        for s, v in stats["category_split"].items():
+            rng = f"[{v['similarity_min']:.2f}, {v['similarity_max']:.2f}]" if "similarity_min" in v else "–"
+            lines.append(f"| {s} | {v['categories']} | {rng} |")
+    return "\n".join(lines)

@@ -1,0 +1,17 @@
+"""Privileged experts: frontier exploration (the paper's DAgger teacher) and shortest path."""
+
+from ovon.experts.config import FrontierExpertConfig, ShortestPathExpertConfig
+from ovon.experts.control import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
+from ovon.experts.frontier_expert import FrontierExpert
+from ovon.experts.shortest_path import ShortestPathExpert
+
+__all__ = [
+    "FrontierExpert",
+    "FrontierExpertConfig",
+    "ShortestPathExpert",
+    "ShortestPathExpertConfig",
+    "STOP",
+    "MOVE_FORWARD",
+    "TURN_LEFT",
+    "TURN_RIGHT",
+]

@@ -1,0 +1,47 @@
+"""Expert configs: every number of the paper's expert is a config value (expert.md)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class FrontierExpertConfig:
+    """Frontier-exploration teacher (expert.md); defaults are the paper's / upstream's values."""
+
+    fov_deg: float = 42.0  # horizontal FOV of the Stretch camera
+    view_range_m: float = 3.0  # cells further than this never become explored
+    pocket_area_m2: float = 1.5  # unexplored components smaller than this (m^2) count as explored
+    linear_speed: float = 0.25  # m/s, for the estimated time of a frontier
+    turn_speed_deg: float = 10.0  # deg/s, for the estimated time of a frontier
+    beeline_distance_m: float = 3.5  # geodesic distance to the nearest viewpoint that starts the bee-line
+    stop_distance_m: float = 0.25  # success radius around a viewpoint
+    stop_margin_m: float = 0.05  # stop this much inside the success radius (grid lookups are +-half a cell)
+    stop_heading_tol_deg: float = 15.0  # final turn to the viewpoint's heading
+    turn_angle_deg: float = 30.0  # one TURN_LEFT / TURN_RIGHT
+    forward_step_m: float = 0.25  # one MOVE_FORWARD (collision prediction and detection)
+    # spec: turn when the next waypoint is more than one turn (30 deg) off; 15 (half a turn) is straighter
+    turn_threshold_deg: float = 30.0
+    lookahead_m: float = 1.0  # furthest path point (in line of sight) used as the heading target
+    min_frontier_m: float = 0.15  # frontiers with fewer cells than this length / cell size are ignored
+    frontier_reached_m: float = 0.5  # re-choose once the agent is this close to the frontier's waypoint
+    frontier_keep_radius_m: float = 0.5  # the target survives while a frontier cell lies this close to it
+    path_deviation_m: float = 0.5  # re-plan when the agent is further than this from its planned path
+    stuck_steps: int = 15  # no progress toward the frontier for this many steps: blacklist it
+    rechoose_every: int = 10  # re-choose the frontier every N steps anyway (0 = only on events)
+    no_frontier_behaviour: Literal["beeline", "stop"] = "beeline"
+
+
+@dataclass(frozen=True)
+class ShortestPathExpertConfig:
+    """Shortest-path (SPOC-style) expert: forward whenever the waypoint is within half a turn."""
+
+    stop_distance_m: float = 0.25
+    stop_margin_m: float = 0.05
+    stop_heading_tol_deg: float = 15.0
+    turn_angle_deg: float = 30.0
+    forward_step_m: float = 0.25
+    turn_threshold_deg: float = 15.0  # half a turn: the heading error after a turn is always <= 15 deg
+    lookahead_m: float = 1.0
+    turn_to_viewpoint_heading: bool = True

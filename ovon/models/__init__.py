@@ -1,0 +1,1 @@
+"""Model wrappers (text and vision encoders) loaded from local files only."""

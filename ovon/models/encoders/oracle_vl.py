@@ -1,0 +1,166 @@
+"""Oracle vision-language image encoder: ORACLE PERCEPTION computed from the semantic frame.
+
+Why: no pretrained image model can be installed here, yet the policy needs an image embedding in the
+same space as the goal text so that open-vocabulary generalisation can be studied. This encoder
+writes, for every visible instance, the text embedding of its category weighted by its pixel-area
+fraction. Every report that uses it must say "oracle perception".
+
+Layout of the output (dim = (global + grid*grid) * text_dim):
+  [ global part (text_dim) | cell (0,0) | cell (0,1) | ... | cell (g-1,g-1) ]  (cells row-major)
+Each part is sum_i (pixels of instance i in the region / pixels of the region) * e_i, where e_i is
+the unit text embedding of the instance's category (background id 0 and unknown ids contribute
+nothing). The vectors are not normalised, so their length tells how much of the region is covered by
+known objects. The global part is the text-aligned part: cosine(global, goal text) is the
+image-goal score (`score`). Without a global part, `score` uses the mean of the cells (equal to the
+global part when the cells have equal pixel counts).
+
+Noise model, per frame and instance (seeded `numpy` generator, deterministic for a given seed and
+call sequence): with probability `dropout` the instance is missed; otherwise its embedding is
+replaced by normalise(e_i + n), n ~ N(0, noise_std^2 / text_dim * I), so `noise_std` is the expected
+noise norm relative to the unit embedding (0.5 -> cosine with the clean embedding ~0.89).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import torch
+
+from ovon.models.encoders.base import ObsBatch, TextEncoder, get_obs
+
+
+class OracleVLEncoder:
+    """Oracle perception image encoder: area-weighted category text embeddings on a spatial grid."""
+
+    name = "oracle-vl (oracle perception)"
+    trainable = False
+
+    def __init__(
+        self,
+        text_encoder: TextEncoder,
+        grid: int = 2,
+        include_global: bool = True,
+        noise_std: float = 0.0,
+        dropout: float = 0.0,
+        seed: int = 0,
+    ) -> None:
+        if grid < 1:
+            raise ValueError(f"oracle grid must be >= 1, got {grid}")
+        if not 0.0 <= dropout <= 1.0:
+            raise ValueError(f"oracle dropout must be in [0, 1], got {dropout}")
+        self.text_encoder = text_encoder
+        self.text_dim = int(text_encoder.dim)
+        self.grid = grid
+        self.include_global = include_global
+        self.noise_std = float(noise_std)
+        self.dropout = float(dropout)
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.parts = grid * grid + (1 if include_global else 0)
+        self.dim = self.parts * self.text_dim
+        self._shared: tuple[np.ndarray, np.ndarray] | None = None
+        self._per_env: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._cells: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    def reseed(self, seed: int) -> None:
+        """Restart the noise stream (e.g. per evaluation episode, for reproducible runs)."""
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+
+    def set_scene(self, instance_to_category: Mapping[int, str], env: int | None = None) -> None:
+        """Register the scene's instance id -> category name (at episode reset).
+
+        `env=None` sets the mapping used by every batch row; `env=i` sets the one for row i only
+        (a trainer that batches several environments in one process).
+        """
+        ids = np.fromiter((int(k) for k in instance_to_category), dtype=np.int64)
+        names = [str(instance_to_category[k]) for k in instance_to_category]
+        size = int(ids.max()) + 1 if ids.size else 1
+        lut = np.full(size, -1, dtype=np.int64)
+        uniq = list(dict.fromkeys(names))
+        index = {n: i for i, n in enumerate(uniq)}
+        if ids.size:
+            lut[ids] = [index[n] for n in names]
+        lut[0] = -1  # id 0 is "no instance"
+        emb = self.text_encoder.encode(uniq).numpy().astype(np.float32) if uniq else np.zeros((0, 1))
+        if uniq:
+            emb = emb / np.maximum(np.linalg.norm(emb, axis=1, keepdims=True), 1e-12)
+        entry = (lut, emb)
+        if env is None:
+            self._shared = entry
+            self._per_env.clear()
+        else:
+            self._per_env[env] = entry
+
+    def _cell_index(self, h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+        key = (h, w)
+        if key not in self._cells:
+            g = self.grid
+            rows = np.minimum(np.arange(h) * g // h, g - 1)
+            cols = np.minimum(np.arange(w) * g // w, g - 1)
+            cell = (rows[:, None] * g + cols[None, :]).astype(np.int64).ravel()
+            pixels = np.bincount(cell, minlength=g * g).astype(np.float64)
+            self._cells[key] = (cell, pixels)
+        return self._cells[key]
+
+    def _mapping(self, row: int) -> tuple[np.ndarray, np.ndarray]:
+        entry = self._per_env.get(row, self._shared)
+        if entry is None:
+            raise RuntimeError(
+                "OracleVLEncoder.set_scene(instance_to_category) must be called before encode() "
+                f"(no mapping for batch row {row})"
+            )
+        return entry
+
+    def encode_frame(self, semantic: np.ndarray, row: int = 0) -> np.ndarray:
+        """One semantic frame (H, W) int -> float32 (dim,)."""
+        lut, emb = self._mapping(row)
+        h, w = semantic.shape
+        cell, pixels = self._cell_index(h, w)
+        sem = semantic.astype(np.int64, copy=False).ravel()
+        sem = np.where((sem >= 0) & (sem < lut.size), sem, 0)
+        cats_per_pixel = lut[sem]
+        known = cats_per_pixel >= 0
+        if not known.any():
+            return np.zeros(self.dim, dtype=np.float32)
+        ids, inv = np.unique(sem[known], return_inverse=True)
+        n = ids.size
+        counts = np.bincount(cell[known] * n + inv, minlength=self.grid * self.grid * n)
+        frac = counts.reshape(self.grid * self.grid, n) / pixels[:, None]
+        vecs = emb[lut[ids]].astype(np.float64)
+        if self.dropout > 0.0:
+            keep = self.rng.random(n) >= self.dropout
+            vecs = vecs * keep[:, None]
+        if self.noise_std > 0.0:
+            noise = self.rng.standard_normal(vecs.shape) * (self.noise_std / np.sqrt(self.text_dim))
+            noisy = vecs + noise
+            noisy /= np.maximum(np.linalg.norm(noisy, axis=1, keepdims=True), 1e-12)
+            vecs = np.where(np.any(vecs != 0, axis=1, keepdims=True), noisy, 0.0)
+        cells = frac @ vecs  # (cells, text_dim)
+        parts = [cells]
+        if self.include_global:
+            glob = (counts.reshape(self.grid * self.grid, n).sum(0) / (h * w)) @ vecs
+            parts.insert(0, glob[None])
+        return np.concatenate(parts, 0).astype(np.float32).ravel()
+
+    def encode(self, batch: ObsBatch) -> torch.Tensor:
+        sem = get_obs(batch, "semantic")
+        if isinstance(sem, torch.Tensor):
+            sem = sem.cpu().numpy()
+        sem = np.asarray(sem)
+        if sem.ndim == 2:
+            sem = sem[None]
+        return torch.from_numpy(np.stack([self.encode_frame(s, i) for i, s in enumerate(sem)]))
+
+    def text_aligned(self, image_emb: torch.Tensor) -> torch.Tensor:
+        """The part of the embedding that lives in the goal-text space: (B, dim) -> (B, text_dim)."""
+        parts = image_emb.reshape(*image_emb.shape[:-1], self.parts, self.text_dim)
+        return parts[..., 0, :] if self.include_global else parts.mean(-2)
+
+    def score(self, image_emb: torch.Tensor, text_emb: torch.Tensor) -> torch.Tensor:
+        """Cosine between the text-aligned image part and goal texts: (B, N)."""
+        a = self.text_aligned(image_emb.float())
+        a = a / a.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        b = text_emb.float() / text_emb.float().norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        return a @ b.T

@@ -1,0 +1,94 @@
+"""SigLIP image encoder (the paper's frozen encoder), loaded only from local files.
+
+Why local only: no machine of this project can download weights, and without `local_files_only` a
+missing model costs ~24 s of network retries before failing. Uses the PIL image processor of
+transformers 5 (`SiglipImageProcessorPil`), never `AutoImageProcessor` (which wants torchvision).
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import numpy as np
+import torch
+
+from ovon.models.encoders.base import ModelNotAvailableError, ObsBatch, get_obs
+
+DEFAULT_SIGLIP = "google/siglip-base-patch16-256"
+
+_LOCK = threading.Lock()
+_LOADED: dict[tuple[str, str], tuple[Any, Any, Any]] = {}
+
+
+def _missing_message(name_or_path: str, err: Exception) -> str:
+    return (
+        f"SigLIP model {name_or_path!r} is not available locally ({type(err).__name__}: "
+        f"{str(err).splitlines()[0] if str(err) else ''}). Weights are never downloaded at run time. "
+        f"On a machine with internet run `huggingface-cli download {name_or_path}` (or "
+        f"`hf download {name_or_path}`), then copy ~/.cache/huggingface to this machine (or set "
+        f"HF_HOME to the copy), or pass a folder written by `save_pretrained` as the model name. "
+        f"Without weights use the default encoders (image=oracle-vl, text=minilm-text: oracle perception)."
+    )
+
+
+def load_siglip(name_or_path: str = DEFAULT_SIGLIP, device: str = "cpu") -> tuple[Any, Any, Any]:
+    """(model, image_processor, tokenizer) from the local cache/folder; shared by image and text.
+
+    Raises `ModelNotAvailableError` at once when the files are missing.
+    """
+    key = (str(name_or_path), device)
+    with _LOCK:
+        if key in _LOADED:
+            return _LOADED[key]
+        from transformers import SiglipImageProcessorPil, SiglipModel, SiglipTokenizer
+
+        try:
+            model = SiglipModel.from_pretrained(str(name_or_path), local_files_only=True)
+            processor = SiglipImageProcessorPil.from_pretrained(str(name_or_path), local_files_only=True)
+            tokenizer = SiglipTokenizer.from_pretrained(str(name_or_path), local_files_only=True)
+        except (OSError, ValueError) as e:
+            raise ModelNotAvailableError(_missing_message(str(name_or_path), e)) from e
+        model = model.to(device).eval()
+        for p in model.parameters():
+            p.requires_grad_(False)
+        _LOADED[key] = (model, processor, tokenizer)
+        return _LOADED[key]
+
+
+def _l2(x: torch.Tensor) -> torch.Tensor:
+    return x / x.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+class SiglipImageEncoder:
+    """Frozen SigLIP image tower: RGB uint8 (B,H,W,3) -> `pooler_output` (B, projection dim)."""
+
+    name = "siglip"
+    trainable = False
+
+    def __init__(self, model_name: str = DEFAULT_SIGLIP, device: str = "cpu", normalize: bool = True) -> None:
+        self.model, self.processor, self.tokenizer = load_siglip(model_name, device)
+        self.model_name = model_name
+        self.device = device
+        self.normalize = normalize
+        cfg = self.model.config
+        self.dim = int(getattr(cfg.vision_config, "projection_size", None) or cfg.vision_config.hidden_size)
+
+    @torch.inference_mode()
+    def encode(self, batch: ObsBatch) -> torch.Tensor:
+        rgb = get_obs(batch, "rgb")
+        if isinstance(rgb, torch.Tensor):
+            rgb = rgb.cpu().numpy()
+        rgb = np.asarray(rgb)
+        if rgb.ndim == 3:
+            rgb = rgb[None]
+        if rgb.dtype != np.uint8:
+            raise TypeError(f"SigLIP expects uint8 RGB frames, got {rgb.dtype}")
+        pixels = self.processor(images=list(rgb), return_tensors="pt")["pixel_values"].to(self.device)
+        out = self.model.get_image_features(pixel_values=pixels).pooler_output
+        out = out.to(torch.float32)
+        return (_l2(out) if self.normalize else out).cpu()
+
+    def score(self, image_emb: torch.Tensor, text_emb: torch.Tensor) -> torch.Tensor:
+        """Cosine image-text similarity (B, N), e.g. for the VLFM value map."""
+        return _l2(image_emb.float()) @ _l2(text_emb.float()).T

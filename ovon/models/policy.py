@@ -1,0 +1,249 @@
+"""Actor-critic policy over per-step embeddings (baselines.md), shared by BC, DAgger and PPO.
+
+    o_t = [image_emb, goal_emb, prev_action_emb]  ->  Linear(hidden)  ->  core  ->  action / critic heads
+
+`prev_action_emb` is `nn.Embedding(num_actions + 1, prev_action_dim)` indexed by previous action + 1,
+0 at an episode start (callers pass -1 there; it is forced to 0 at every start anyway).
+The core is a `TransformerCore` (sliding-window KV cache when acting) or an `LSTMCore`.
+Why one wrapper: trainers, evaluators and checkpoints see a single interface whatever the core.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+from torch.distributions import Categorical
+
+from ovon.config.base import from_dict, to_dict
+from ovon.models.config import EncoderConfig, PolicyConfig
+from ovon.models.lstm import LSTMCore, matched_lstm_hidden, transformer_core_params
+from ovon.models.transformer import TransformerCore
+
+CHECKPOINT_FORMAT = "ovon-policy-v1"
+
+
+class ActorCritic(nn.Module):
+    """Policy + value function; `forward` for training on chunks, `act_step`/`act` for online acting.
+
+    If `encoder_cfg.image == "cnn"` the trainable CNN lives inside the policy (`image_encoder`), so
+    it is optimised, saved and loaded with it; frozen encoders stay outside (embeddings are inputs).
+    """
+
+    def __init__(
+        self, cfg: PolicyConfig, image_dim: int, text_dim: int, encoder_cfg: EncoderConfig | None = None
+    ) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.image_dim = image_dim
+        self.text_dim = text_dim
+        self.encoder_cfg = encoder_cfg
+        self.obs_dim = image_dim + text_dim
+        self.image_encoder: nn.Module | None = None
+        if encoder_cfg is not None and encoder_cfg.image == "cnn":
+            from ovon.models.encoders.cnn import CNNEncoder
+
+            if encoder_cfg.cnn_dim != image_dim:
+                raise ValueError(f"image_dim {image_dim} != cnn_dim {encoder_cfg.cnn_dim}")
+            self.image_encoder = CNNEncoder(
+                encoder_cfg.cnn_dim, encoder_cfg.cnn_channels, encoder_cfg.cnn_depth, encoder_cfg.cnn_max_depth
+            )
+        self.prev_action_emb = nn.Embedding(cfg.num_actions + 1, cfg.prev_action_dim)
+        self.input_proj = nn.Linear(self.obs_dim + cfg.prev_action_dim, cfg.hidden)
+        self.core = self._make_core(cfg)
+        self.action_head = nn.Linear(self.core.out_dim, cfg.num_actions)
+        self.critic_head = nn.Linear(self.core.out_dim, 1)
+        nn.init.normal_(self.action_head.weight, std=0.01)  # near-uniform initial policy (RL)
+        nn.init.zeros_(self.action_head.bias)
+
+    @staticmethod
+    def _make_core(cfg: PolicyConfig) -> nn.Module:
+        if cfg.core == "transformer":
+            return TransformerCore(cfg.hidden, cfg.layers, cfg.heads, cfg.mlp, cfg.context, cfg.rope_base, cfg.norm_eps)
+        if cfg.core == "lstm":
+            width = cfg.lstm_hidden or matched_lstm_hidden(
+                cfg.hidden, cfg.layers, transformer_core_params(cfg.hidden, cfg.layers, cfg.mlp)
+            )
+            return LSTMCore(cfg.hidden, width, cfg.layers)
+        raise ValueError(f"unknown policy core {cfg.core!r}; valid: transformer, lstm")
+
+    # ----- inputs -----
+    @staticmethod
+    def make_obs(image_emb: torch.Tensor, goal_emb: torch.Tensor) -> torch.Tensor:
+        """Concatenate image (..., Di) and goal (..., Dg) embeddings; the goal broadcasts over time
+        (e.g. image (B,T,Di) with goal (B,Dg))."""
+        while goal_emb.ndim < image_emb.ndim:
+            goal_emb = goal_emb.unsqueeze(-2)
+        goal_emb = goal_emb.expand(*image_emb.shape[:-1], goal_emb.shape[-1])
+        return torch.cat([image_emb, goal_emb.to(image_emb.dtype)], -1)
+
+    def encode_images(self, batch: Any) -> torch.Tensor:
+        """Run the policy-owned trainable image encoder (only when `encoder_cfg.image == "cnn"`)."""
+        if self.image_encoder is None:
+            raise RuntimeError("this policy owns no image encoder; pass precomputed embeddings")
+        return self.image_encoder.encode(batch)
+
+    def _project(self, obs_emb: torch.Tensor, prev_actions: torch.Tensor, starts: torch.Tensor | None):
+        if obs_emb.shape[-1] != self.obs_dim:
+            raise ValueError(f"obs_emb last dim {obs_emb.shape[-1]} != image_dim + text_dim = {self.obs_dim}")
+        idx = (prev_actions.long() + 1).clamp(0, self.cfg.num_actions)
+        if starts is not None:
+            idx = torch.where(starts.bool(), torch.zeros_like(idx), idx)
+        x = torch.cat([obs_emb, self.prev_action_emb(idx).to(obs_emb.dtype)], -1)
+        return self.input_proj(x)
+
+    # ----- training -----
+    def forward_seq(
+        self,
+        obs_emb: torch.Tensor,
+        prev_actions: torch.Tensor,
+        episode_starts: torch.Tensor | None = None,
+        state: Any = None,
+        positions: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, Any]:
+        """Like `forward`, also returning the core's final state (LSTM (h, c); None for the transformer).
+
+        `state` is the LSTM's state before the chunk (recurrent PPO); `positions` (B,T) the
+        transformer's RoPE positions (default: steps since the last start within the chunk).
+        """
+        x = self._project(obs_emb, prev_actions, episode_starts)
+        if isinstance(self.core, TransformerCore):
+            feats, new_state = self.core(x, episode_starts, positions), None
+        else:
+            feats, new_state = self.core(x, episode_starts, state)
+        return self.action_head(feats), self.critic_head(feats).squeeze(-1), new_state
+
+    def forward(
+        self,
+        obs_emb: torch.Tensor,
+        prev_actions: torch.Tensor,
+        episode_starts: torch.Tensor | None = None,
+        state: Any = None,
+        positions: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """obs_emb (B,T,image_dim+text_dim), prev_actions (B,T) long (-1 at start), episode_starts
+        (B,T) bool -> logits (B,T,num_actions), values (B,T). A chunk may hold episode boundaries."""
+        logits, values, _ = self.forward_seq(obs_emb, prev_actions, episode_starts, state, positions)
+        return logits, values
+
+    # ----- acting -----
+    def init_state(self, batch_size: int, device: torch.device | str | None = None) -> Any:
+        """Fresh acting state for `batch_size` envs (KV cache / input window / LSTM (h, c))."""
+        return self.core.init_state(batch_size, device, self.cfg.act_mode)
+
+    def act_step(
+        self,
+        obs_emb: torch.Tensor,
+        prev_action: torch.Tensor,
+        state: Any,
+        done_mask: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor, Any]:
+        """One step for B envs: obs_emb (B,D), prev_action (B,) (-1 at start), done_mask (B,) True
+        where this step is the first of a new episode -> logits (B,A), value (B,), new state.
+        The transformer's state is updated in place (and returned)."""
+        x = self._project(obs_emb, prev_action, done_mask)
+        feats, state = self.core.step(x, state, done_mask)
+        return self.action_head(feats), self.critic_head(feats).squeeze(-1), state
+
+    @torch.no_grad()
+    def act(
+        self,
+        obs_emb: torch.Tensor,
+        prev_action: torch.Tensor,
+        state: Any,
+        done_mask: torch.Tensor | None = None,
+        deterministic: bool = False,
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, Any]:
+        """Sample (or argmax) actions: -> (actions (B,), log_probs (B,), values (B,), state)."""
+        logits, value, state = self.act_step(obs_emb, prev_action, state, done_mask)
+        dist = self.distribution(logits)
+        action = logits.argmax(-1) if deterministic else dist.sample()
+        return action, dist.log_prob(action), value, state
+
+    @staticmethod
+    def distribution(logits: torch.Tensor) -> Categorical:
+        return Categorical(logits=logits.float())
+
+    # ----- fine-tuning / checkpoints -----
+    def reinit_critic(self) -> None:
+        """Fresh critic head for BC->RL / DAgger->RL (the IL policy never trained it)."""
+        self.critic_head.reset_parameters()
+
+    def parameter_groups(self) -> dict[str, list[nn.Parameter]]:
+        """Named groups for the fine-tune schedule: critic, actor (head + core + projection + owned
+        encoder), prev_action (frozen during fine-tuning upstream)."""
+        actor = [*self.action_head.parameters(), *self.core.parameters(), *self.input_proj.parameters()]
+        if self.image_encoder is not None:
+            actor += list(self.image_encoder.parameters())
+        return {
+            "critic": list(self.critic_head.parameters()),
+            "actor": actor,
+            "prev_action": list(self.prev_action_emb.parameters()),
+        }
+
+    def num_params(self, part: str | None = None) -> int:
+        mod = self if part is None else getattr(self, part)
+        return sum(p.numel() for p in mod.parameters())
+
+    def save(self, path: str | Path, extra: dict[str, Any] | None = None) -> None:
+        """Checkpoint with everything needed to rebuild the module (config + dims + weights)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        torch.save(
+            {
+                "format": CHECKPOINT_FORMAT,
+                "policy_config": to_dict(self.cfg),
+                "encoder_config": None if self.encoder_cfg is None else to_dict(self.encoder_cfg),
+                "image_dim": self.image_dim,
+                "text_dim": self.text_dim,
+                "state_dict": self.state_dict(),
+                "extra": extra or {},
+            },
+            path,
+        )
+
+    @classmethod
+    def load(cls, path: str | Path, map_location: str | torch.device = "cpu") -> ActorCritic:
+        """Rebuild a policy saved by `save` (any core)."""
+        ckpt = torch.load(Path(path), map_location=map_location, weights_only=True)
+        if ckpt.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"{path} is not an ovon policy checkpoint ({CHECKPOINT_FORMAT})")
+        cfg = from_dict(PolicyConfig, ckpt["policy_config"])
+        enc = ckpt.get("encoder_config")
+        enc_cfg = None if enc is None else from_dict(EncoderConfig, enc)
+        policy = build_policy(cfg, ckpt["image_dim"], ckpt["text_dim"], enc_cfg)
+        policy.load_state_dict(ckpt["state_dict"])
+        policy.checkpoint_extra = ckpt.get("extra", {})
+        return policy
+
+
+class TransformerPolicy(ActorCritic):
+    """ActorCritic with the decoder-only transformer core (the paper's policy)."""
+
+    def __init__(self, cfg: PolicyConfig, image_dim: int, text_dim: int, encoder_cfg: EncoderConfig | None = None):
+        if cfg.core != "transformer":
+            raise ValueError("TransformerPolicy needs cfg.core == 'transformer'")
+        super().__init__(cfg, image_dim, text_dim, encoder_cfg)
+
+
+class LSTMPolicy(ActorCritic):
+    """ActorCritic with the LSTM core (the RNN baseline, width matched in parameters)."""
+
+    def __init__(self, cfg: PolicyConfig, image_dim: int, text_dim: int, encoder_cfg: EncoderConfig | None = None):
+        if cfg.core != "lstm":
+            raise ValueError("LSTMPolicy needs cfg.core == 'lstm'")
+        super().__init__(cfg, image_dim, text_dim, encoder_cfg)
+
+
+def build_policy(
+    policy_cfg: PolicyConfig, image_dim: int, text_dim: int, encoder_cfg: EncoderConfig | None = None
+) -> ActorCritic:
+    """`TransformerPolicy` or `LSTMPolicy` according to `policy_cfg.core`."""
+    cls = TransformerPolicy if policy_cfg.core == "transformer" else LSTMPolicy
+    return cls(policy_cfg, image_dim, text_dim, encoder_cfg)
+
+
+def load_policy(path: str | Path, map_location: str | torch.device = "cpu") -> ActorCritic:
+    return ActorCritic.load(path, map_location)

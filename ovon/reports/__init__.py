@@ -1,0 +1,1 @@
+"""Reports over run folders: comparison tables, failure breakdowns, plots and episode videos."""

@@ -1,0 +1,79 @@
+"""Tables that compare run folders written by `ovon evaluate`."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+from ovon.evaluate.results import paper_table, read_records, summarize
+from ovon.task.tracker import FAILURE_LABELS
+
+
+def load_run(run_dir: str | Path) -> tuple[str, list[dict]]:
+    run_dir = Path(run_dir)
+    if not (run_dir / "episodes.jsonl").exists():
+        raise FileNotFoundError(
+            f"{run_dir} is not a run folder (no episodes.jsonl); run `ovon evaluate --out {run_dir}`"
+        )
+    name = run_dir.name
+    meta = run_dir / "run.json"
+    if meta.exists():
+        name = json.loads(meta.read_text()).get("name") or name
+    return name, read_records(run_dir)
+
+
+def failure_breakdown(records: list[dict]) -> dict[str, dict[str, float]]:
+    """Per split: share of *all* episodes (as in the paper's figure) ending with each failure label."""
+    out: dict[str, dict[str, float]] = {}
+    by_split: dict[str, list[dict]] = defaultdict(list)
+    for r in records:
+        by_split[r["split"]].append(r)
+    for split, rs in sorted(by_split.items()):
+        n = len(rs)
+        out[split] = {label: sum(r["failure"] == label for r in rs) / n for label in FAILURE_LABELS}
+        out[split]["success"] = sum(r["success"] for r in rs) / n
+    return out
+
+
+def sr_by(records: list[dict], key) -> dict[str, dict[str, tuple[float, int]]]:
+    """split -> group -> (success rate, episodes) for a grouping function of a record."""
+    acc: dict[str, dict[str, list[int]]] = defaultdict(lambda: defaultdict(list))
+    for r in records:
+        acc[r["split"]][key(r)].append(int(r["success"]))
+    return {s: {g: (sum(v) / len(v), len(v)) for g, v in sorted(groups.items())} for s, groups in acc.items()}
+
+
+DISTANCE_BINS = (0.0, 2.5, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0, float("inf"))
+
+
+def distance_bin(d: float) -> str:
+    for lo, hi in zip(DISTANCE_BINS, DISTANCE_BINS[1:]):
+        if lo <= d < hi:
+            return f"{lo:g}-{hi:g} m" if hi != float("inf") else f">= {lo:g} m"
+    return "nan"
+
+
+def markdown_report(runs: list[tuple[str, list[dict]]]) -> str:
+    rows = {name: summarize(recs) for name, recs in runs}
+    parts = ["# ovon evaluation report", "", "## SR / SPL (%), mean ± std over seeds", "", paper_table(rows), ""]
+    parts += ["## Failure breakdown (% of all episodes)", ""]
+    for name, recs in runs:
+        fb = failure_breakdown(recs)
+        parts.append(f"### {name}")
+        parts.append("| split | success | " + " | ".join(FAILURE_LABELS) + " |")
+        parts.append("|---|---|" + "---|" * len(FAILURE_LABELS))
+        for split, shares in fb.items():
+            cells = [f"{100 * shares['success']:.1f}"] + [f"{100 * shares[lbl]:.1f}" for lbl in FAILURE_LABELS]
+            parts.append(f"| {split} | " + " | ".join(cells) + " |")
+        parts.append("")
+    parts += ["## Extra metrics (mean over seeds)", ""]
+    parts.append("| agent | split | SoftSPL | dist. to goal (m) | steps | collisions |")
+    parts.append("|---|---|---|---|---|---|")
+    for name, summ in rows.items():
+        for split, e in summ.items():
+            parts.append(
+                f"| {name} | {split} | {100 * e['soft_spl']['mean']:.1f} | {e['distance_to_goal']['mean']:.2f} "
+                f"| {e['steps']['mean']:.0f} | {e['collisions']['mean']:.1f} |"
+            )
+    return "\n".join(parts) + "\n"

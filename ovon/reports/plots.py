@@ -1,0 +1,86 @@
+"""Figures: failure breakdown per split (the paper's figure), SR vs geodesic distance, SR per category."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from ovon.reports.compare import DISTANCE_BINS, distance_bin, failure_breakdown, sr_by  # noqa: E402
+from ovon.task.tracker import FAILURE_LABELS  # noqa: E402
+
+# The paper's colours: timeouts orange family (ignored goal pink, missed goal brown), wrong object yellow,
+# entered-and-left purple.
+FAILURE_COLORS = {
+    "timeout_missed_goal": "#8c564b",
+    "timeout_ignored_goal": "#e377c2",
+    "timeout_left_goal": "#ff7f0e",
+    "stop_wrong_object": "#f2c80f",
+    "stop_too_far": "#7f7f7f",
+    "stop_left_goal": "#9467bd",
+    "stop_never_saw_goal": "#c49c94",
+}
+SPLIT_ORDER = ("val_seen", "val_seen_synonyms", "val_unseen")
+
+
+def _ordered(splits):
+    return [s for s in SPLIT_ORDER if s in splits] + sorted(set(splits) - set(SPLIT_ORDER))
+
+
+def plot_failures(name: str, records: list[dict], out: Path) -> Path:
+    fb = failure_breakdown(records)
+    splits = _ordered(fb)
+    fig, ax = plt.subplots(figsize=(1.8 + 1.6 * len(splits), 4.2))
+    bottoms = [0.0] * len(splits)
+    for label in FAILURE_LABELS:
+        vals = [100 * fb[s][label] for s in splits]
+        ax.bar(splits, vals, bottom=bottoms, color=FAILURE_COLORS[label], label=label.replace("_", " "))
+        bottoms = [b + v for b, v in zip(bottoms, vals)]
+    for i, s in enumerate(splits):
+        timeout = 100 * sum(fb[s][lbl] for lbl in FAILURE_LABELS if lbl.startswith("timeout"))
+        ax.text(i, bottoms[i] + 1, f"timeout {timeout:.1f}%", ha="center", fontsize=8, color="#ff7f0e")
+    ax.set_ylabel("% of episodes (failures)")
+    ax.set_title(f"Failure modes: {name}")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_sr_vs_distance(runs: list[tuple[str, list[dict]]], out: Path) -> Path:
+    labels = [distance_bin(lo) for lo in DISTANCE_BINS[:-1]]
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for name, recs in runs:
+        table = sr_by(recs, lambda r: distance_bin(float(r["geodesic_distance"])))
+        for split in _ordered(table):
+            ys = [100 * table[split][lbl][0] if lbl in table[split] else float("nan") for lbl in labels]
+            ax.plot(labels, ys, marker="o", label=f"{name} / {split}")
+    ax.set_xlabel("geodesic distance start -> goal")
+    ax.set_ylabel("SR (%)")
+    ax.set_ylim(-2, 102)
+    ax.tick_params(axis="x", labelrotation=30)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def plot_sr_per_category(name: str, records: list[dict], out: Path, top: int = 40) -> Path:
+    table = sr_by(records, lambda r: r["category"])
+    splits = _ordered(table)
+    fig, axes = plt.subplots(len(splits), 1, figsize=(10, 2.8 * len(splits)), squeeze=False)
+    for ax, split in zip(axes[:, 0], splits):
+        items = sorted(table[split].items(), key=lambda kv: (-kv[1][1], kv[0]))[:top]
+        ax.bar([k for k, _ in items], [100 * v[0] for _, v in items], color="#1f77b4")
+        ax.set_title(f"{name} / {split}: SR per category (most frequent {len(items)})", fontsize=9)
+        ax.set_ylim(0, 100)
+        ax.tick_params(axis="x", labelrotation=70, labelsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

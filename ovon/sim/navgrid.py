@@ -1,0 +1,679 @@
+"""Navigability grids computed from any triangle mesh (procedural house or real scan).
+
+Why a grid and not a navmesh: habitat-sim (Recast) is not installable here, and a 2D grid per floor
+gives collision checks, islands, snapping and fast-marching geodesics with plain numpy.
+
+Method (one pass over the triangles for each stage, compiled with numba):
+
+1. Surface samples: every non-vertical triangle is rasterised at the cell *centres* of the xz grid
+   (exactly what a vertical ray per cell would hit, all hits at once). A sample is a floor candidate
+   when its triangle faces up with a slope below `max_slope_deg` (winding decides "up", as in Recast).
+2. Clearance: every triangle (vertical walls included) is clipped to each cell square it overlaps; its
+   y-range inside the cell blocks any candidate `h` of that cell with an overlap of
+   (h + max_climb, h + agent.height). Low things (rugs, thresholds <= max_climb) do not block.
+3. Floors: candidates are grouped into floors by `Scene.floor_heights` (bands around each height) or,
+   without hints, by clustering the free candidate heights (gaps > `floor_separation`); clusters smaller
+   than 1 m^2 or mostly without anything above them (roofs) are not floors. Per floor and cell the
+   lowest free candidate in the band is the floor surface.
+4. Steps: two 8-neighbour cells whose floor heights differ by more than `max_climb` are both marked not
+   free (a ledge, as Recast's ledge filter does); the radius erosion then keeps the agent away from it.
+5. Erosion: `navigable` = free cells whose centre is at least `agent.radius` from the centre of the
+   nearest non-free cell (scipy EDT). Cell centres sit on multiples of `cell_size`, so walls at round
+   coordinates fall inside a cell rather than on a boundary.
+6. Islands: 4-connected components of `navigable` (4 = the stencil fast marching uses, so an island is
+   exactly the set a distance field can reach). Tiny islands are kept; `random_point` filters them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+import os
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+from scipy import ndimage
+
+from ovon.config.sim import AgentConfig, NavConfig
+from ovon.scenes.model import Scene
+
+DEFAULT_MAX_SLOPE_DEG = 30.0  # used when NavConfig has no `max_slope_deg`
+MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
+MIN_COVERED_FRACTION = 0.5  # no-hint mode: a floor has a ceiling over most of it; roofs do not
+_EPS_BARY = 1e-7
+_uid_counter = itertools.count(1)
+
+
+# ----------------------------------------------------------------------------------------------
+# numba kernels
+# ----------------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _sample_pass(V, F, ox, oz, cs, rows, cols, cos_slope, fill, counts, ptr, ys, walk):
+    """Rasterise non-vertical triangles at cell centres: count (fill=False) or write samples."""
+    for t in range(F.shape[0]):
+        a = F[t, 0]
+        b = F[t, 1]
+        c = F[t, 2]
+        ax, ay, az = V[a, 0], V[a, 1], V[a, 2]
+        e1x, e1y, e1z = V[b, 0] - ax, V[b, 1] - ay, V[b, 2] - az
+        e2x, e2y, e2z = V[c, 0] - ax, V[c, 1] - ay, V[c, 2] - az
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        nl = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nl < 1e-12 or abs(ny) < 1e-6 * nl:
+            continue  # degenerate or vertical: a vertical ray never hits it
+        den = e1x * e2z - e1z * e2x  # = -ny, twice the signed xz area
+        is_walk = ny / nl >= cos_slope
+        xmin = min(ax, ax + e1x, ax + e2x)
+        xmax = max(ax, ax + e1x, ax + e2x)
+        zmin = min(az, az + e1z, az + e2z)
+        zmax = max(az, az + e1z, az + e2z)
+        c0 = max(0, int(math.ceil((xmin - ox) / cs - 0.5 - 1e-9)))
+        c1 = min(cols - 1, int(math.floor((xmax - ox) / cs - 0.5 + 1e-9)))
+        r0 = max(0, int(math.ceil((zmin - oz) / cs - 0.5 - 1e-9)))
+        r1 = min(rows - 1, int(math.floor((zmax - oz) / cs - 0.5 + 1e-9)))
+        for r in range(r0, r1 + 1):
+            pz = oz + (r + 0.5) * cs - az
+            for cc in range(c0, c1 + 1):
+                px = ox + (cc + 0.5) * cs - ax
+                w1 = (px * e2z - pz * e2x) / den
+                w2 = (e1x * pz - e1z * px) / den
+                if w1 < -_EPS_BARY or w2 < -_EPS_BARY or w1 + w2 > 1.0 + _EPS_BARY:
+                    continue
+                cell = r * cols + cc
+                if fill:
+                    k = ptr[cell] + counts[cell]
+                    ys[k] = ay + w1 * e1y + w2 * e2y
+                    walk[k] = is_walk
+                counts[cell] += 1
+
+
+@njit(cache=True)
+def _sort_cells(ptr, ys, walk):
+    """Sort each cell's samples by height (insertion sort: a cell holds a handful)."""
+    for cell in range(ptr.shape[0] - 1):
+        s0 = ptr[cell]
+        s1 = ptr[cell + 1]
+        for i in range(s0 + 1, s1):
+            y = ys[i]
+            w = walk[i]
+            j = i - 1
+            while j >= s0 and ys[j] > y:
+                ys[j + 1] = ys[j]
+                walk[j + 1] = walk[j]
+                j -= 1
+            ys[j + 1] = y
+            walk[j + 1] = w
+
+
+@njit(cache=True)
+def _clip_yrange(px, py, pz, qx, qy, qz, n, x0, x1, z0, z1):
+    """Sutherland-Hodgman clip of polygon (px,py,pz)[:n] to the square; returns (ymin, ymax, ok)."""
+    for plane in range(4):
+        m = 0
+        for i in range(n):
+            j = (i + 1) % n
+            if plane == 0:
+                di = px[i] - x0
+                dj = px[j] - x0
+            elif plane == 1:
+                di = x1 - px[i]
+                dj = x1 - px[j]
+            elif plane == 2:
+                di = pz[i] - z0
+                dj = pz[j] - z0
+            else:
+                di = z1 - pz[i]
+                dj = z1 - pz[j]
+            if di >= 0.0:
+                qx[m] = px[i]
+                qy[m] = py[i]
+                qz[m] = pz[i]
+                m += 1
+            if (di >= 0.0) != (dj >= 0.0):
+                s = di / (di - dj)
+                qx[m] = px[i] + s * (px[j] - px[i])
+                qy[m] = py[i] + s * (py[j] - py[i])
+                qz[m] = pz[i] + s * (pz[j] - pz[i])
+                m += 1
+        n = m
+        if n == 0:
+            return 0.0, 0.0, False
+        for i in range(n):
+            px[i] = qx[i]
+            py[i] = qy[i]
+            pz[i] = qz[i]
+    lo = py[0]
+    hi = py[0]
+    for i in range(1, n):
+        lo = min(lo, py[i])
+        hi = max(hi, py[i])
+    return lo, hi, True
+
+
+@njit(cache=True)
+def _block_pass(V, F, ox, oz, cs, rows, cols, ptr, ys, walk, climb, height, blocked):
+    """Mark floor candidates that some triangle intrudes on within (h + climb, h + height)."""
+    px = np.empty(16)
+    py = np.empty(16)
+    pz = np.empty(16)
+    qx = np.empty(16)
+    qy = np.empty(16)
+    qz = np.empty(16)
+    tol = 1e-5
+    for t in range(F.shape[0]):
+        a = F[t, 0]
+        b = F[t, 1]
+        c = F[t, 2]
+        ymin = min(V[a, 1], V[b, 1], V[c, 1])
+        ymax = max(V[a, 1], V[b, 1], V[c, 1])
+        xmin = min(V[a, 0], V[b, 0], V[c, 0])
+        xmax = max(V[a, 0], V[b, 0], V[c, 0])
+        zmin = min(V[a, 2], V[b, 2], V[c, 2])
+        zmax = max(V[a, 2], V[b, 2], V[c, 2])
+        c0 = max(0, int(math.floor((xmin - ox) / cs)))
+        c1 = min(cols - 1, int(math.floor((xmax - ox) / cs)))
+        r0 = max(0, int(math.floor((zmin - oz) / cs)))
+        r1 = min(rows - 1, int(math.floor((zmax - oz) / cs)))
+        for r in range(r0, r1 + 1):
+            for cc in range(c0, c1 + 1):
+                cell = r * cols + cc
+                s0 = ptr[cell]
+                s1 = ptr[cell + 1]
+                need = False
+                for k in range(s0, s1):
+                    if walk[k] and not blocked[k]:
+                        h = ys[k]
+                        if ymax > h + climb + tol and ymin < h + height - tol:
+                            need = True
+                            break
+                if not need:
+                    continue
+                for i in range(3):
+                    v = F[t, i]
+                    px[i] = V[v, 0]
+                    py[i] = V[v, 1]
+                    pz[i] = V[v, 2]
+                x0 = ox + cc * cs
+                z0 = oz + r * cs
+                lo, hi, ok = _clip_yrange(px, py, pz, qx, qy, qz, 3, x0, x0 + cs, z0, z0 + cs)
+                if not ok:
+                    continue
+                for k in range(s0, s1):
+                    if walk[k] and not blocked[k]:
+                        h = ys[k]
+                        if hi > h + climb + tol and lo < h + height - tol:
+                            blocked[k] = True
+
+
+@njit(cache=True)
+def _covered(ptr, ys, walk, blocked, height, out):
+    """out[k] = a free candidate k has some surface above its head (indoors, not a roof)."""
+    for cell in range(ptr.shape[0] - 1):
+        s1 = ptr[cell + 1]
+        for k in range(ptr[cell], s1):
+            if walk[k] and not blocked[k]:
+                top = ys[s1 - 1]
+                out[k] = top >= ys[k] + height - 1e-5
+
+
+@njit(cache=True)
+def _floor_heights(ptr, ys, walk, blocked, lo, hi, climb, free_h, any_h):
+    """Per cell with lo <= y < hi: the floor surface = top of the lowest stack of free candidates
+    (a stack: each within `climb` of the previous, e.g. a floor and a low step box lying on it),
+    and the lowest candidate, free or not."""
+    for cell in range(ptr.shape[0] - 1):
+        for k in range(ptr[cell], ptr[cell + 1]):
+            y = ys[k]
+            if walk[k] and y >= lo and y < hi:
+                if math.isnan(any_h[cell]):
+                    any_h[cell] = y
+                if not blocked[k]:
+                    if math.isnan(free_h[cell]):
+                        free_h[cell] = y
+                    elif y <= free_h[cell] + climb + 1e-5:
+                        free_h[cell] = y
+
+
+@njit(cache=True)
+def _los(mask, r0, c0, r1, c1):
+    """Supercover grid traversal between two cell centres; corners need both side cells."""
+    rows, cols = mask.shape
+    if r0 < 0 or c0 < 0 or r1 < 0 or c1 < 0 or r0 >= rows or r1 >= rows or c0 >= cols or c1 >= cols:
+        return False
+    if not mask[r0, c0]:
+        return False
+    dx = c1 - c0
+    dy = r1 - r0
+    nx = abs(dx)
+    ny = abs(dy)
+    sx = 1 if dx > 0 else -1
+    sy = 1 if dy > 0 else -1
+    x = c0
+    y = r0
+    ix = 0
+    iy = 0
+    while ix < nx or iy < ny:
+        dec = (1 + 2 * ix) * ny - (1 + 2 * iy) * nx
+        if dec == 0:
+            if not mask[y, x + sx] or not mask[y + sy, x]:
+                return False
+            x += sx
+            y += sy
+            ix += 1
+            iy += 1
+        elif dec < 0:
+            x += sx
+            ix += 1
+        else:
+            y += sy
+            iy += 1
+        if not mask[y, x]:
+            return False
+    return True
+
+
+# ----------------------------------------------------------------------------------------------
+# data types
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass(eq=False)
+class NavGrid:
+    """One floor: row grows with z, col with x; `origin` is the world (x, z) corner of cell (0, 0)."""
+
+    floor: int
+    height: float
+    origin: np.ndarray
+    cell_size: float
+    navigable: np.ndarray
+    free: np.ndarray
+    heights: np.ndarray
+    islands: np.ndarray
+    island_area: np.ndarray
+    island_radius: np.ndarray
+    uid: int = field(default_factory=lambda: next(_uid_counter))
+    _nearest: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.navigable.shape
+
+    @property
+    def num_islands(self) -> int:
+        return int(len(self.island_area))
+
+    def world_to_cell(self, xyz):
+        """(row, col) of a point, or two int arrays for an (N, 3) array; may be out of bounds."""
+        p = np.asarray(xyz, dtype=np.float64)
+        if p.ndim == 1:
+            col = math.floor((float(p[0]) - float(self.origin[0])) / self.cell_size)
+            row = math.floor((float(p[2]) - float(self.origin[1])) / self.cell_size)
+            return row, col
+        cols = np.floor((p[:, 0] - self.origin[0]) / self.cell_size).astype(np.int64)
+        rows = np.floor((p[:, 2] - self.origin[1]) / self.cell_size).astype(np.int64)
+        return rows, cols
+
+    def cell_to_world(self, row: int, col: int) -> np.ndarray:
+        """Cell centre; y is the floor surface there (the floor's nominal height where there is none)."""
+        y = self.height
+        if self.in_bounds(row, col):
+            h = float(self.heights[row, col])
+            if not math.isnan(h):
+                y = h
+        return np.array(
+            [
+                float(self.origin[0]) + (col + 0.5) * self.cell_size,
+                y,
+                float(self.origin[1]) + (row + 0.5) * self.cell_size,
+            ]
+        )
+
+    def in_bounds(self, row, col):
+        rows, cols = self.navigable.shape
+        if np.ndim(row) == 0:
+            return 0 <= row < rows and 0 <= col < cols
+        row = np.asarray(row)
+        col = np.asarray(col)
+        return (row >= 0) & (row < rows) & (col >= 0) & (col < cols)
+
+    def is_navigable(self, xyz) -> bool:
+        """Whether the agent centre may stand at this x/z (y is ignored: the grid is one floor)."""
+        r, c = self.world_to_cell(xyz)
+        return bool(self.in_bounds(r, c) and self.navigable[r, c])
+
+    def island_of(self, xyz) -> int:
+        r, c = self.world_to_cell(xyz)
+        if not self.in_bounds(r, c):
+            return -1
+        return int(self.islands[r, c])
+
+    def nearest_cell(self, row: int, col: int) -> tuple[int, int]:
+        """Nearest navigable cell to a (clamped) cell; (-1, -1) when the floor has none."""
+        if self._nearest is None:
+            if not self.navigable.any():
+                self._nearest = np.full((2,) + self.navigable.shape, -1, dtype=np.int32)
+            else:
+                _, idx = ndimage.distance_transform_edt(~self.navigable, return_indices=True)
+                self._nearest = idx.astype(np.int32)
+        rows, cols = self.navigable.shape
+        row = min(max(int(row), 0), rows - 1)
+        col = min(max(int(col), 0), cols - 1)
+        return int(self._nearest[0, row, col]), int(self._nearest[1, row, col])
+
+    def snap(self, xyz) -> np.ndarray:
+        """Nearest navigable cell centre (nan (3,) when the floor has no navigable cell)."""
+        r, c = self.world_to_cell(xyz)
+        r, c = self.nearest_cell(r, c)
+        if r < 0:
+            return np.full(3, np.nan)
+        return self.cell_to_world(r, c)
+
+    def random_point(self, rng: np.random.Generator, min_island_radius: float = 0.0) -> np.ndarray:
+        """Uniform navigable point (jittered inside its cell) on an island of radius >= min_island_radius."""
+        ok = np.flatnonzero(self.island_radius >= min_island_radius)
+        if len(ok) == 0:
+            raise ValueError(f"floor {self.floor}: no island with radius >= {min_island_radius} m")
+        if len(ok) == len(self.island_radius):
+            cand = np.flatnonzero(self.navigable.ravel())
+        else:
+            cand = np.flatnonzero(np.isin(self.islands.ravel(), ok))
+        k = int(cand[rng.integers(len(cand))])
+        r, c = divmod(k, self.navigable.shape[1])
+        p = self.cell_to_world(r, c)
+        jitter = rng.uniform(-0.49, 0.49, size=2) * self.cell_size
+        p[0] += jitter[0]
+        p[2] += jitter[1]
+        return p
+
+    def line_of_sight(self, a_rc, b_rc, mask: np.ndarray | None = None) -> bool:
+        """Straight segment between two cell centres stays on `mask` (default: navigable)."""
+        m = self.navigable if mask is None else mask
+        return bool(_los(m, int(a_rc[0]), int(a_rc[1]), int(b_rc[0]), int(b_rc[1])))
+
+
+@dataclass(eq=False)
+class SceneNav:
+    """All floors of a scene; `floors[i]` matches `Scene.floor_heights[i]` when the scene has them."""
+
+    floors: list[NavGrid]
+    agent: AgentConfig
+    nav: NavConfig
+    key: str = ""
+
+    @property
+    def floor_heights(self) -> list[float]:
+        return [g.height for g in self.floors]
+
+    def floor_index(self, xyz) -> int:
+        """Highest floor whose surface (nominal height, or its grid height at this x/z, whichever is
+        lower: sunken areas count) is at or below the point + 0.3 m; 0 below every floor."""
+        p = np.asarray(xyz, dtype=np.float64)
+        y = float(p[1])
+        tol = 0.3
+        idx = 0
+        for i, g in enumerate(self.floors):
+            h = g.height
+            r, c = g.world_to_cell(p)
+            if g.in_bounds(r, c):
+                hc = float(g.heights[r, c])
+                if not math.isnan(hc):
+                    h = min(h, hc)
+            if y >= h - tol:
+                idx = i
+        return idx
+
+    def grid_for(self, xyz) -> NavGrid:
+        return self.floors[self.floor_index(xyz)]
+
+    def is_navigable(self, xyz) -> bool:
+        return bool(self.floors) and self.grid_for(xyz).is_navigable(xyz)
+
+    def snap(self, xyz) -> np.ndarray:
+        return self.grid_for(xyz).snap(xyz)
+
+
+# ----------------------------------------------------------------------------------------------
+# building
+# ----------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Samples:
+    ptr: np.ndarray
+    ys: np.ndarray
+    walk: np.ndarray
+    blocked: np.ndarray
+
+
+def _rasterise(V, F, origin, cs, rows, cols, agent: AgentConfig, max_slope_deg: float) -> _Samples:
+    cos_slope = math.cos(math.radians(max_slope_deg))
+    ncell = rows * cols
+    counts = np.zeros(ncell, dtype=np.int64)
+    dummy_f = np.empty(0)
+    dummy_b = np.empty(0, dtype=np.bool_)
+    ptr = np.zeros(ncell + 1, dtype=np.int64)
+    _sample_pass(V, F, origin[0], origin[1], cs, rows, cols, cos_slope, False, counts, ptr, dummy_f, dummy_b)
+    np.cumsum(counts, out=ptr[1:])
+    ys = np.empty(int(ptr[-1]))
+    walk = np.empty(int(ptr[-1]), dtype=np.bool_)
+    counts[:] = 0
+    _sample_pass(V, F, origin[0], origin[1], cs, rows, cols, cos_slope, True, counts, ptr, ys, walk)
+    _sort_cells(ptr, ys, walk)
+    blocked = np.zeros(len(ys), dtype=np.bool_)
+    _block_pass(V, F, origin[0], origin[1], cs, rows, cols, ptr, ys, walk, agent.max_climb, agent.height, blocked)
+    return _Samples(ptr, ys, walk, blocked)
+
+
+def _floor_bands(
+    s: _Samples, hints: list[float], agent: AgentConfig, nav: NavConfig, cs: float
+) -> list[tuple[float, float, float]]:
+    """(nominal height, lo, hi) per floor: bands around hints, else clusters of free candidate heights."""
+    sep = nav.floor_separation
+    if hints:
+        fh = sorted(float(h) for h in hints)
+        bands = []
+        for i, h in enumerate(fh):
+            lo = h - sep if i == 0 else max(h - sep / 2.0, bands[-1][2])
+            hi = h + 2.0 * sep
+            if i + 1 < len(fh):
+                hi = min(hi, fh[i + 1] - sep / 2.0)
+            bands.append((h, lo, hi))
+        return bands
+    cand = s.walk & ~s.blocked
+    cov = np.zeros(len(s.ys), dtype=np.bool_)
+    _covered(s.ptr, s.ys, s.walk, s.blocked, agent.height, cov)
+    hs = s.ys[cand]
+    cv = cov[cand]
+    if len(hs) == 0:
+        return []
+    order = np.argsort(hs)
+    hs, cv = hs[order], cv[order]
+    splits = np.flatnonzero(np.diff(hs) > sep) + 1
+    bands = []
+    for seg_h, seg_c in zip(np.split(hs, splits), np.split(cv, splits), strict=True):
+        if len(seg_h) * cs * cs < MIN_FLOOR_AREA or seg_c.mean() < MIN_COVERED_FRACTION:
+            continue
+        bins = np.round(seg_h / nav.cell_height).astype(np.int64)
+        vals, cnt = np.unique(bins, return_counts=True)
+        mode = vals[np.argmax(cnt)]
+        nominal = float(np.median(seg_h[bins == mode]))
+        bands.append((nominal, float(seg_h[0]) - 1e-6, float(seg_h[-1]) + 1e-6))
+    return bands
+
+
+def _islands(navigable: np.ndarray, origin: np.ndarray, cs: float):
+    labels, n = ndimage.label(navigable)
+    islands = labels.astype(np.int32) - 1
+    if n == 0:
+        return islands, np.zeros(0), np.zeros(0)
+    rr, cc = np.nonzero(navigable)
+    lab = labels[rr, cc] - 1
+    cnt = np.bincount(lab, minlength=n).astype(np.float64)
+    x = origin[0] + (cc + 0.5) * cs
+    z = origin[1] + (rr + 0.5) * cs
+    mx = np.bincount(lab, weights=x, minlength=n) / cnt
+    mz = np.bincount(lab, weights=z, minlength=n) / cnt
+    d = np.hypot(x - mx[lab], z - mz[lab])
+    radius = np.zeros(n)
+    np.maximum.at(radius, lab, d)
+    return islands, cnt * cs * cs, radius
+
+
+def _make_grid(
+    floor: int,
+    height: float,
+    origin: np.ndarray,
+    cs: float,
+    free_h: np.ndarray,
+    any_h: np.ndarray,
+    agent: AgentConfig,
+) -> NavGrid:
+    """Ledge cut + radius erosion + islands for one floor's per-cell heights."""
+    free = ~np.isnan(free_h)
+    ledge = np.zeros_like(free)
+    fh = np.where(free, free_h, 0.0)
+    tol = agent.max_climb + 1e-5
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = (slice(0, free.shape[0] - dr), slice(max(0, -dc), free.shape[1] - max(0, dc)))
+        b = (slice(dr, None), slice(max(0, dc), free.shape[1] - max(0, -dc)))
+        jump = free[a] & free[b] & (np.abs(fh[a] - fh[b]) > tol)
+        ledge[a] |= jump
+        ledge[b] |= jump
+    free &= ~ledge
+    clearance = ndimage.distance_transform_edt(free) * cs
+    navigable = free & (clearance >= agent.radius - 1e-6)
+    islands, area, radius = _islands(navigable, origin, cs)
+    heights = np.where(np.isnan(free_h), any_h, free_h).astype(np.float32)
+    return NavGrid(
+        floor=floor,
+        height=float(height),
+        origin=origin.copy(),
+        cell_size=cs,
+        navigable=navigable,
+        free=free,
+        heights=heights,
+        islands=islands,
+        island_area=area,
+        island_radius=radius,
+    )
+
+
+def _grid_frame(V: np.ndarray, cs: float) -> tuple[np.ndarray, int, int]:
+    """Origin so that cell centres are multiples of cs, with one empty cell of padding on each side."""
+    lo = V[:, [0, 2]].min(axis=0)
+    hi = V[:, [0, 2]].max(axis=0)
+    first = np.floor(lo / cs) - 1  # index (in multiples of cs) of the first cell centre
+    last = np.ceil(hi / cs) + 1
+    origin = (first - 0.5) * cs
+    cols, rows = (last - first + 1).astype(int)
+    return origin, int(rows), int(cols)
+
+
+def compute_navigation(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    floor_heights: list[float] | None,
+    agent: AgentConfig,
+    nav: NavConfig,
+) -> list[NavGrid]:
+    """Uncached core of `build_navigation` for a bare mesh."""
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    F = np.ascontiguousarray(faces, dtype=np.int64)
+    cs = float(nav.cell_size)
+    if len(F) == 0:
+        return []
+    origin, rows, cols = _grid_frame(V, cs)
+    slope = float(getattr(nav, "max_slope_deg", DEFAULT_MAX_SLOPE_DEG))
+    s = _rasterise(V, F, origin, cs, rows, cols, agent, slope)
+    grids = []
+    for i, (nominal, lo, hi) in enumerate(_floor_bands(s, list(floor_heights or []), agent, nav, cs)):
+        free_h = np.full(rows * cols, np.nan)
+        any_h = np.full(rows * cols, np.nan)
+        _floor_heights(s.ptr, s.ys, s.walk, s.blocked, lo, hi, agent.max_climb, free_h, any_h)
+        grids.append(_make_grid(i, nominal, origin, cs, free_h.reshape(rows, cols), any_h.reshape(rows, cols), agent))
+    return grids
+
+
+_CACHE: OrderedDict[str, SceneNav] = OrderedDict()
+_CACHE_SIZE = 8
+
+
+def _cache_key(scene: Scene, agent: AgentConfig, nav: NavConfig) -> str:
+    h = hashlib.sha1()
+    v = np.ascontiguousarray(scene.mesh.vertices, dtype=np.float32)
+    f = np.ascontiguousarray(scene.mesh.faces, dtype=np.int32)
+    h.update(np.asarray(v.shape, dtype=np.int64).tobytes())
+    h.update(v.tobytes())
+    h.update(f.tobytes())
+    h.update(repr((list(map(float, scene.floor_heights)), agent, nav, "navgrid-v1")).encode())
+    return h.hexdigest()
+
+
+def _save(path: Path, grids: list[NavGrid]) -> None:
+    arrays: dict[str, np.ndarray] = {}
+    for i, g in enumerate(grids):
+        arrays[f"meta{i}"] = np.array([g.height, g.origin[0], g.origin[1], g.cell_size])
+        arrays[f"free{i}"] = g.free
+        arrays[f"heights{i}"] = g.heights
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, n=np.array(len(grids)), **arrays)
+    os.replace(tmp, path)
+
+
+def _load(path: Path, agent: AgentConfig) -> list[NavGrid]:
+    grids = []
+    with np.load(path) as z:
+        for i in range(int(z["n"])):
+            h, ox, oz, cs = z[f"meta{i}"]
+            free, heights = z[f"free{i}"], z[f"heights{i}"]
+            clearance = ndimage.distance_transform_edt(free) * cs
+            navigable = free & (clearance >= agent.radius - 1e-6)
+            origin = np.array([ox, oz])
+            islands, area, radius = _islands(navigable, origin, float(cs))
+            grids.append(NavGrid(i, float(h), origin, float(cs), navigable, free, heights, islands, area, radius))
+    return grids
+
+
+def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavConfig | None = None) -> SceneNav:
+    """Navigation grids of a scene, cached in-process by mesh content + params (and on disk when the
+    environment variable OVON_CACHE_DIR names a folder)."""
+    agent = agent or AgentConfig()
+    nav = nav or NavConfig()
+    key = _cache_key(scene, agent, nav)
+    hit = _CACHE.get(key)
+    if hit is not None:
+        _CACHE.move_to_end(key)
+        return hit
+    grids = None
+    cache_dir = os.environ.get("OVON_CACHE_DIR")
+    path = Path(cache_dir) / f"nav_{key}.npz" if cache_dir else None
+    if path is not None and path.exists():
+        try:
+            grids = _load(path, agent)
+        except (OSError, KeyError, ValueError):
+            grids = None
+    if grids is None:
+        grids = compute_navigation(scene.mesh.vertices, scene.mesh.faces, scene.floor_heights, agent, nav)
+        if path is not None:
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                _save(path, grids)
+            except OSError:
+                pass
+    result = SceneNav(floors=grids, agent=agent, nav=nav, key=key)
+    _CACHE[key] = result
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return result
+
+
+def clear_cache() -> None:
+    _CACHE.clear()

@@ -1,0 +1,104 @@
+"""Training checkpoints that resume exactly: weights, optimiser, schedule, counters, every RNG state
+and the environment-sampling state, written atomically (temp file + `os.replace`).
+
+Why atomic: a run killed while saving must leave the previous checkpoint intact. Why every RNG: with
+the same seeds, `--resume` after N updates gives the same losses as an uninterrupted run.
+The policy alone is also exported as `policy.pt` (`ActorCritic.save` format) for `PolicyAgent`.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+STATE_NAME = "checkpoint.pt"
+POLICY_NAME = "policy.pt"
+FORMAT = "ovon-train-v1"
+
+
+def rng_state() -> dict[str, Any]:
+    state = {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def set_rng_state(state: dict[str, Any]) -> None:
+    random.setstate(state["python"])
+    np.random.set_state(state["numpy"])
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2**32)
+    torch.manual_seed(seed)
+
+
+def atomic_torch_save(obj: Any, path: str | Path) -> Path:
+    """`torch.save` to a temp file in the same folder, then `os.replace` (atomic on POSIX)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        torch.save(obj, tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def save_checkpoint(out_dir: str | Path, payload: dict[str, Any]) -> Path:
+    """`payload` holds model/optimizer state dicts, counters and per-rank state (RNG, envs, acting)."""
+    payload = {"format": FORMAT, **payload}
+    return atomic_torch_save(payload, Path(out_dir) / STATE_NAME)
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """A training checkpoint (a folder holding `checkpoint.pt`, or the file itself)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / STATE_NAME
+    if not path.is_file():
+        raise FileNotFoundError(f"no training checkpoint at {path}")
+    # Our own file: it pickles RNG states and acting-state dataclasses, so weights_only cannot hold it.
+    ckpt = torch.load(path, map_location=map_location, weights_only=False)
+    if ckpt.get("format") != FORMAT:
+        raise ValueError(f"{path} is not an ovon training checkpoint ({FORMAT})")
+    return ckpt
+
+
+def export_policy(policy: torch.nn.Module, out_dir: str | Path, extra: dict[str, Any], update: int, keep: int) -> Path:
+    """Write `policy.pt` (atomically) and a numbered snapshot, keeping the newest `keep` snapshots."""
+    out_dir = Path(out_dir)
+    fd, tmp = tempfile.mkstemp(prefix=".policy.", suffix=".tmp", dir=out_dir)
+    os.close(fd)
+    try:
+        policy.save(tmp, extra)
+        os.replace(tmp, out_dir / POLICY_NAME)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    if keep > 0:
+        snaps = out_dir / "snapshots"
+        snaps.mkdir(exist_ok=True)
+        snap = snaps / f"policy_{update:07d}.pt"
+        try:
+            os.link(out_dir / POLICY_NAME, snap)
+        except OSError:
+            import shutil
+
+            shutil.copyfile(out_dir / POLICY_NAME, snap)
+        for old in sorted(snaps.glob("policy_*.pt"))[:-keep]:
+            old.unlink()
+    return out_dir / POLICY_NAME

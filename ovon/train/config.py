@@ -1,0 +1,186 @@
+"""Training configs: one dataclass tree for BC, DAgger and PPO (+ BC->RL / DAgger->RL fine-tuning).
+
+Why one tree: every number of baselines.md is a config value reachable from YAML or `--set key=value`
+(`ovon.config.base.build`), and a checkpoint stores the whole tree so `--resume` and the policy agent
+rebuild exactly what was trained. Presets: `paper` (upstream hyperparameters), `cpu-small` (learns on
+a 2-core CPU in tens of minutes), `tiny` (tests: seconds).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Literal
+
+from ovon.config.sim import CameraConfig, SimConfig
+from ovon.config.task import RewardConfig, TaskConfig
+from ovon.models.config import EncoderConfig, PolicyConfig
+
+Algo = Literal["bc", "dagger", "ppo"]
+ExpertName = Literal["frontier", "shortest-path"]
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO (upstream values). Minibatches split the envs, so each minibatch holds whole sequences."""
+
+    epochs: int = 1
+    minibatches: int = 2
+    clip: float = 0.2
+    value_coef: float = 0.5
+    entropy_coef: float = 0.01
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    normalize_advantages: bool = True
+
+
+@dataclass(frozen=True)
+class FinetuneConfig:
+    """BC->RL / DAgger->RL schedule (baselines.md), in updates; `scale` stretches or shrinks it.
+
+    critic lr: `critic_lr` until `critic_decay_start`, then linear to `critic_lr_final` at
+    `critic_decay_end`. actor (+ core + input projection) lr: 0 until `actor_unfreeze`, then linear
+    from 0 to `actor_lr` at `actor_warmup_end`. The prev-action embedding stays frozen.
+    """
+
+    critic_lr: float = 2.5e-4
+    critic_lr_final: float = 1.5e-5
+    critic_decay_start: int = 500
+    critic_decay_end: int = 1000
+    actor_lr: float = 1.5e-5
+    actor_unfreeze: int = 750
+    actor_warmup_end: int = 1000
+    freeze_prev_action: bool = True
+    reinit_critic: bool = True
+    reward: Literal["sparse", "dense"] = "sparse"
+    scale: float = 1.0  # multiplies every update number above
+
+
+@dataclass(frozen=True)
+class DaggerConfig:
+    """beta = probability that the expert's label (not the student's sample) drives the env.
+
+    Linear from `beta_start` to `beta_end` over `beta_updates` updates; upstream used beta = 0.
+    """
+
+    beta_start: float = 0.0
+    beta_end: float = 0.0
+    beta_updates: int = 0
+
+
+@dataclass(frozen=True)
+class BCConfig:
+    """Offline BC: record expert episodes as shards, then cross-entropy on chunks of <= context steps."""
+
+    shards: str = ""  # folder of recorded shards; "" = <out>/shards (recorded when missing)
+    record_episodes: int = 1000  # episodes to record when the shards are missing
+    episodes_per_shard: int = 50
+    record_workers: int = 2
+    batch_chunks: int = 32  # chunks per update (per rank)
+    epochs: int = 10  # passes over the chunks (unless `max_updates` > 0 caps it)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    algo: Algo = "dagger"
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+    encoder: EncoderConfig = field(default_factory=EncoderConfig)
+    sim: SimConfig = field(default_factory=lambda: SimConfig(camera=CameraConfig(width=160, height=120)))
+    task: TaskConfig = field(default_factory=TaskConfig)
+    expert: ExpertName = "frontier"
+    # Environments / rollouts (per rank).
+    num_envs: int = 32
+    env_workers: int = -1  # processes for the envs: -1 = one per env, 0 = in this process
+    rollout_steps: int = 100
+    scene_repeat: int = 4  # episodes sampled from a scene before an env may switch scene (world reloads)
+    # Budget: environment steps over all ranks; `max_updates` > 0 caps the number of updates instead.
+    total_steps: int = 150_000_000
+    max_updates: int = 0
+    # Optimiser.
+    lr: float = 2.5e-4
+    adam_eps: float = 1e-5
+    max_grad_norm: float = 0.2
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
+    dagger: DaggerConfig = field(default_factory=DaggerConfig)
+    bc: BCConfig = field(default_factory=BCConfig)
+    # Bookkeeping.
+    seed: int = 0
+    device: str = "auto"  # auto = cuda:<local rank> when available, else cpu
+    threads: int = 0  # torch threads in the trainer (0 = leave torch's default)
+    log_every: int = 1  # updates
+    checkpoint_every: int = 50  # updates
+    keep_checkpoints: int = 3  # numbered policy snapshots kept besides the latest
+    text_cache: str = ""  # .pt table {text: embedding}; "" = <out>/text_cache.pt
+    progress: bool = True
+
+
+def _paper() -> TrainConfig:
+    return TrainConfig(sim=SimConfig(), encoder=EncoderConfig(image="siglip", text="siglip-text"))
+
+
+def _cpu_small() -> TrainConfig:
+    return TrainConfig(
+        policy=PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=16),
+        encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=2, oracle_global=True),
+        sim=SimConfig(camera=CameraConfig(width=96, height=72)),
+        task=TaskConfig(max_steps=300),
+        num_envs=4,
+        env_workers=2,
+        rollout_steps=64,
+        total_steps=2_000_000,
+        lr=5e-4,
+        max_grad_norm=0.5,
+        finetune=FinetuneConfig(critic_lr=5e-4, actor_lr=1e-4, scale=0.1),
+        bc=BCConfig(record_episodes=200, record_workers=2, batch_chunks=16, epochs=20),
+        checkpoint_every=20,
+    )
+
+
+def _tiny() -> TrainConfig:
+    return TrainConfig(
+        policy=PolicyConfig(hidden=32, layers=1, heads=2, mlp=64, context=16, prev_action_dim=8),
+        encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=1, oracle_global=False),
+        sim=SimConfig(camera=CameraConfig(width=32, height=32)),
+        task=TaskConfig(max_steps=40),
+        num_envs=2,
+        env_workers=0,
+        rollout_steps=8,
+        total_steps=10_000,
+        max_updates=2,
+        lr=1e-3,
+        max_grad_norm=1.0,
+        finetune=FinetuneConfig(scale=0.002),
+        bc=BCConfig(record_episodes=4, record_workers=1, episodes_per_shard=2, batch_chunks=4, epochs=50),
+        checkpoint_every=1,
+        progress=False,
+    )
+
+
+PRESETS = {"paper": _paper, "cpu-small": _cpu_small, "tiny": _tiny}
+
+
+def train_preset(name: str, **changes: object) -> TrainConfig:
+    """Named preset (+ top-level field changes); an unknown name lists the valid ones."""
+    if name not in PRESETS:
+        raise KeyError(f"unknown train preset {name!r}; valid: {sorted(PRESETS)}")
+    return dataclasses.replace(PRESETS[name](), **changes)
+
+
+def reward_for(cfg: TrainConfig, finetune: bool) -> TaskConfig:
+    """Task config with the reward kind the algorithm uses (dense for RL, sparse when fine-tuning)."""
+    kind = cfg.finetune.reward if finetune else "dense"
+    return dataclasses.replace(cfg.task, reward=dataclasses.replace(cfg.task.reward, kind=kind))
+
+
+__all__ = [
+    "BCConfig",
+    "DaggerConfig",
+    "FinetuneConfig",
+    "PPOConfig",
+    "PRESETS",
+    "RewardConfig",
+    "TrainConfig",
+    "reward_for",
+    "train_preset",
+]

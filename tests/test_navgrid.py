@@ -1,0 +1,156 @@
+"""Navigability grids on hand-built meshes with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from meshes import empty_floor, room_boxes, scene_from_boxes, wall_x_with_gap
+
+from ovon.config.sim import AgentConfig, NavConfig
+from ovon.sim.navgrid import build_navigation, clear_cache
+
+R = AgentConfig().radius
+CS = NavConfig().cell_size
+
+
+def _island_at(g, x, z) -> int:
+    return g.island_of(np.array([x, 0.0, z]))
+
+
+def test_box_room_area_and_one_island():
+    nav = build_navigation(scene_from_boxes(room_boxes(0, 0, 5, 4), floor_heights=[0.0]))
+    assert len(nav.floors) == 1
+    g = nav.floors[0]
+    area = g.navigable.sum() * CS * CS
+    expected = (5 - 2 * R) * (4 - 2 * R)
+    assert abs(area - expected) < (2 * (5 + 4)) * CS  # one cell around the perimeter
+    assert g.num_islands == 1
+    assert abs(g.island_area[0] - area) < 1e-9
+    assert g.island_radius[0] == pytest.approx(np.hypot(5 - 2 * R, 4 - 2 * R) / 2, abs=2 * CS)
+    # walls are not free, the interior is; outside the house has no floor
+    assert g.free[g.world_to_cell([2.5, 0, 2.0])] and not g.free[g.world_to_cell([0.0, 0, 2.0])]
+    assert not g.is_navigable([-1.0, 0, 2.0]) and not g.is_navigable([100.0, 0, 100.0])
+    assert g.is_navigable([R + 0.05, 0, 2.0]) and not g.is_navigable([R - 0.05, 0, 2.0])
+    assert g.height == 0.0 and g.heights[g.world_to_cell([2.5, 0, 2.0])] == pytest.approx(0.0)
+
+
+def test_roof_is_not_a_floor_without_hints():
+    nav = build_navigation(scene_from_boxes(room_boxes(0, 0, 5, 4)))  # no floor_heights
+    assert len(nav.floors) == 1 and nav.floors[0].height == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("width,islands", [(0.30, 2), (0.40, 1), (0.90, 1)])
+def test_doorway_width(width, islands):
+    boxes = room_boxes(0, 0, 10, 4) + wall_x_with_gap(5.0, 0, 4, 1.5, 1.5 + width)
+    g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
+    assert g.num_islands == islands
+    same = _island_at(g, 2.0, 2.0) == _island_at(g, 8.0, 2.0)
+    assert same == (islands == 1)
+
+
+@pytest.mark.parametrize("step,connected", [(0.15, False), (0.05, True), (0.10, True)])
+def test_step_height(step, connected):
+    boxes = room_boxes(0, 0, 6, 4) + [((3.0, 0.0, 0.0), (6.0, step, 4.0))]
+    g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
+    a, b = _island_at(g, 1.5, 2.0), _island_at(g, 4.5, 2.0)
+    assert a >= 0 and b >= 0
+    assert (a == b) == connected
+    assert g.heights[g.world_to_cell([4.5, 0, 2.0])] == pytest.approx(step, abs=1e-5)
+
+
+def test_low_ceiling_blocks_floor_under_it():
+    # a slab 1.0..1.2 m over x 2..3: under it no clearance; its top (1.3 m to the ceiling) is no floor either
+    boxes = room_boxes(0, 0, 5, 4) + [((2.0, 1.0, 1.0), (3.0, 1.2, 3.0))]
+    g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
+    r, c = g.world_to_cell(np.array([[2.5, 0, 2.0], [2.1, 0, 1.1], [2.9, 0, 2.9]]))
+    assert not g.navigable[r, c].any() and not g.free[r, c].any()
+    assert g.num_islands == 1
+    assert g.is_navigable([1.0, 0, 2.0]) and g.is_navigable([4.0, 0, 2.0])
+
+
+def test_table_top_is_a_separate_island():
+    # a 1 m high table top with head room above it: the floor under it is blocked; its top is an island
+    boxes = room_boxes(0, 0, 5, 4, wall_height=3.0) + [((2.0, 0.95, 1.0), (3.0, 1.0, 3.0))]
+    g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
+    main = _island_at(g, 1.0, 2.0)
+    top = _island_at(g, 2.5, 2.0)
+    assert main >= 0 and top >= 0 and top != main
+    assert g.heights[g.world_to_cell([2.5, 0, 2.0])] == pytest.approx(1.0, abs=1e-5)
+
+
+def test_two_stacked_floors():
+    boxes = room_boxes(0, 0, 5, 4) + room_boxes(0, 0, 5, 4, floor_y=3.0)
+    for hints in ([0.0, 3.0], []):
+        nav = build_navigation(scene_from_boxes(boxes, floor_heights=hints))
+        assert [round(g.height, 3) for g in nav.floors] == [0.0, 3.0]
+        for g in nav.floors:
+            assert g.num_islands == 1
+            assert g.island_area[0] == pytest.approx((5 - 2 * R) * (4 - 2 * R), abs=18 * CS)
+        assert nav.floor_index([2.5, 0.0, 2.0]) == 0
+        assert nav.floor_index([2.5, 1.2, 2.0]) == 0
+        assert nav.floor_index([2.5, 3.0, 2.0]) == 1
+        assert nav.floor_index([2.5, 4.0, 2.0]) == 1
+        assert nav.grid_for([2.5, 3.0, 2.0]) is nav.floors[1]
+        assert nav.floors[1].heights[nav.floors[1].world_to_cell([2.5, 3, 2])] == pytest.approx(3.0)
+
+
+def test_world_cell_roundtrip_and_vectorised():
+    g = build_navigation(scene_from_boxes(empty_floor(5, 4), floor_heights=[0.0])).floors[0]
+    pts = np.array([[1.01, 0, 2.02], [3.33, 0, 0.51]])
+    rows, cols = g.world_to_cell(pts)
+    for p, r, c in zip(pts, rows, cols):
+        assert (r, c) == g.world_to_cell(p)
+        q = g.cell_to_world(r, c)
+        assert abs(q[0] - p[0]) <= CS / 2 + 1e-9 and abs(q[2] - p[2]) <= CS / 2 + 1e-9
+    assert g.in_bounds(rows, cols).all()
+    assert not g.in_bounds(-1, 0)
+
+
+def test_snap_and_random_point_respects_min_island_radius():
+    big = room_boxes(0, 0, 5, 4)
+    small = room_boxes(8, 0, 9.5, 1.5)
+    g = build_navigation(scene_from_boxes(big + small, floor_heights=[0.0])).floors[0]
+    assert g.num_islands == 2
+    small_id = _island_at(g, 8.75, 0.75)
+    assert small_id >= 0 and g.island_radius[small_id] < 1.5
+    rng = np.random.default_rng(0)
+    picked = {g.island_of(g.random_point(rng, min_island_radius=1.5)) for _ in range(300)}
+    assert small_id not in picked and len(picked) == 1
+    picked_all = [g.island_of(g.random_point(rng)) for _ in range(300)]
+    assert small_id in picked_all and all(g.is_navigable(g.random_point(rng)) for _ in range(50))
+    with pytest.raises(ValueError):
+        g.random_point(rng, min_island_radius=100.0)
+    # a point inside a wall snaps to a navigable cell next to it; a navigable point to its own cell
+    s = g.snap([0.0, 0.0, 2.0])
+    assert g.is_navigable(s) and abs(s[0] - R) < 2 * CS and abs(s[2] - 2.0) < CS
+    p = np.array([2.51, 0.0, 2.02])
+    assert np.allclose(g.snap(p), g.cell_to_world(*g.world_to_cell(p)))
+
+
+def test_line_of_sight():
+    boxes = room_boxes(0, 0, 10, 4) + wall_x_with_gap(5.0, 0, 4, 3.0, 4.0)
+    g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
+    a = g.world_to_cell([2.0, 0, 1.0])
+    b = g.world_to_cell([8.0, 0, 1.0])
+    c = g.world_to_cell([2.0, 0, 3.5])
+    d = g.world_to_cell([8.0, 0, 3.5])
+    assert not g.line_of_sight(a, b)
+    assert g.line_of_sight(c, d) and g.line_of_sight(a, c) and g.line_of_sight(a, a)
+    assert not g.line_of_sight(a, (-5, 3))
+    assert g.line_of_sight(a, b, mask=np.ones_like(g.navigable))
+
+
+def test_cache_returns_same_object_and_disk_cache(tmp_path, monkeypatch):
+    scene = scene_from_boxes(empty_floor(3, 3), floor_heights=[0.0])
+    a = build_navigation(scene)
+    assert build_navigation(scene) is a
+    assert build_navigation(scene, AgentConfig(radius=0.3)) is not a
+    monkeypatch.setenv("OVON_CACHE_DIR", str(tmp_path))
+    clear_cache()
+    b = build_navigation(scene)
+    assert list(tmp_path.glob("nav_*.npz"))
+    clear_cache()
+    c = build_navigation(scene)
+    assert c is not b
+    assert np.array_equal(c.floors[0].navigable, a.floors[0].navigable)
+    assert np.array_equal(c.floors[0].islands, a.floors[0].islands)
