@@ -151,7 +151,7 @@ def test_yaw_convention(backend: str, scene: Scene) -> None:
 
 
 @needs_gl
-@pytest.mark.parametrize("size", [(160, 120), (360, 640), (224, 224)])
+@pytest.mark.parametrize("size", [(160, 120), (360, 640), (224, 224), (33, 17)])  # odd: row alignment
 def test_gl_embree_agree(scene: Scene, size: tuple[int, int]) -> None:
     cfg = camera(*size, hfov=42.0 if size[0] < size[1] else 79.0)
     g = make_renderer(scene, cfg, "gl")

@@ -36,6 +36,9 @@ class SplitGenConfig:
     holdout_fraction: float = 0.25
     similarity_threshold: float = 0.68
     children: bool = True  # children_object_categories from synonym families (splits.children_for)
+    # Children = same shape family AND text similarity >= this. Higher than the split threshold because at
+    # 0.68 a third of the categories get children ("bathroom cabinet" -> five other cabinets).
+    children_threshold: float = 0.8
 
 
 @dataclass(frozen=True)

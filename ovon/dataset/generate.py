@@ -305,7 +305,7 @@ def generate(
     split_cats = {s: csplit.categories(s) for s in ALL_SPLITS}
     vocab, enc = load_vocabulary(), default_text_encoder()
     children = {
-        s: (children_map(split_cats[s], vocab, enc, cfg.splits.similarity_threshold) if cfg.splits.children else {})
+        s: (children_map(split_cats[s], vocab, enc, cfg.splits.children_threshold) if cfg.splits.children else {})
         for s in splits
     }
     atomic_write_text(out / "generation_config.json", json.dumps(to_dict(cfg), indent=2, sort_keys=True))

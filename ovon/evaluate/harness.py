@@ -148,7 +148,7 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
     for split, specs in specs_by_split.items():
         if not specs:
             raise ValueError(f"split {split!r} in {cfg.data} has no episodes")
-    atomic_write_text(run_dir / "run.json", json.dumps({"name": cfg.name or cfg.agent, **to_dict(cfg)}, indent=2))
+    atomic_write_text(run_dir / "run.json", json.dumps({**to_dict(cfg), "name": cfg.name or cfg.agent}, indent=2))
     done = {record_key(r) for r in read_records(run_dir, repair=True)}
     units = _units(cfg, specs_by_split, done)
     total = sum(len(u["specs"]) for u in units)

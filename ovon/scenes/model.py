@@ -18,7 +18,7 @@ class Mesh:
     face_colors: np.ndarray | None = None  # (M, 3) uint8, flat shading colour
     vertex_colors: np.ndarray | None = None  # (N, 3) uint8
     uvs: np.ndarray | None = None  # (N, 2) float32, with `texture`
-    texture: np.ndarray | None = None  # (H, W, 3) uint8, row 0 = top of the image (v = 1)
+    texture: np.ndarray | None = None  # (H, W, 3) uint8; glTF UV convention: uv (0, 0) = row 0, top-left
     face_instance: np.ndarray | None = None  # (M,) int32 semantic instance id per face, 0 = none
 
     @property

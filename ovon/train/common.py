@@ -195,3 +195,103 @@ def param_checksum(module: torch.nn.Module) -> float:
     """Sum over parameters in float64: identical across DDP ranks when they stay in sync."""
     with torch.no_grad():
         return float(sum(p.detach().double().sum().item() for p in module.parameters()))
+
+
+# ----- online (DAgger / PPO) run set-up, checkpoints and resume ------------------------------------
+def open_online(cfg, specs: list[EpisodeSpec], out_dir: str | Path, task, label: bool, init: str | None = None):
+    """Join the process group, take this rank's episodes, start its envs and build (or load) the policy.
+
+    Returns (cfg, info, envs, first batch, policy on the rank's device). `cfg` gets the policy/encoder
+    config actually used (from `init` when fine-tuning)."""
+    from ovon.train import distributed as dist
+    from ovon.train.checkpoint import seed_everything
+    from ovon.train.rollout import make_vec_env
+
+    info = dist.setup(cfg.device)
+    set_threads(cfg.threads)
+    seed_everything(cfg.seed + 7919 * info.rank)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    init_policy = load_init_policy(init, cfg.encoder) if init else None
+    if init_policy is not None:
+        cfg = dataclasses.replace(cfg, policy=init_policy.cfg, encoder=init_policy.encoder_cfg or cfg.encoder)
+    mine = dist.shard(list(specs), info)
+    table = rank_text_table(cfg, list(specs), out, info)
+    envs = make_vec_env(cfg, mine, task, table, label, info.rank)
+    batch = envs.reset()
+    text_dim = int(batch.goal.shape[-1])
+    image_dim = int(batch.image.shape[-1]) if isinstance(batch.image, torch.Tensor) else cfg.encoder.cnn_dim
+    policy = init_policy or build_train_policy(cfg.policy, cfg.encoder, image_dim, text_dim)
+    if (policy.image_dim, policy.text_dim) != (image_dim, text_dim):
+        raise ValueError(f"policy expects image/text dims {(policy.image_dim, policy.text_dim)}, "
+                         f"the envs give {(image_dim, text_dim)}")
+    policy.text_table = table
+    return cfg, info, envs, batch, policy.to(info.device)
+
+
+def rank_text_table(cfg, specs: list[EpisodeSpec], out: Path, info) -> dict:
+    """Rank 0 computes and caches the text table; the other ranks read the cache after a barrier."""
+    from ovon.train import distributed as dist
+
+    path = Path(cfg.text_cache) if cfg.text_cache else out / "text_cache.pt"
+    texts = needed_texts(specs)
+    if info.is_main:
+        table = text_table(cfg.encoder, texts, path, write=True)
+    dist.barrier(info)
+    if not info.is_main:
+        table = text_table(cfg.encoder, texts, path, write=False)
+    return table
+
+
+def num_updates(cfg, world_size: int) -> int:
+    if cfg.max_updates > 0:
+        return cfg.max_updates
+    return max(1, cfg.total_steps // (cfg.num_envs * world_size * cfg.rollout_steps))
+
+
+def save_online(out: Path, info, cfg, algo: str, policy, optimizer, update: int, step: int, rank_state: dict,
+                extra: dict | None = None) -> None:
+    """Gather every rank's state (RNG, envs, acting memory) and let rank 0 write checkpoint + policy."""
+    from ovon.config.base import to_dict
+    from ovon.train import distributed as dist
+    from ovon.train.checkpoint import export_policy, rng_state, save_checkpoint
+
+    ranks = dist.gather_objects({**rank_state, "rng": rng_state()}, info)
+    if info.is_main:
+        save_checkpoint(out, {"algo": algo, "config": to_dict(cfg), "policy": policy.state_dict(),
+                              "optimizer": optimizer.state_dict(), "update": update, "step": step,
+                              "world_size": info.world_size, "ranks": ranks, "extra": extra or {}})
+        export_policy(policy, out, policy_extra(cfg, algo, update, step, policy), update, cfg.keep_checkpoints)
+    dist.barrier(info)
+
+
+def policy_extra(cfg, algo: str, update: int, step: int, policy) -> dict:
+    """What `PolicyAgent` needs besides weights: the goal-text table and the sim it was trained in."""
+    from ovon.config.base import to_dict
+
+    table = getattr(policy, "text_table", None) or {}
+    return {"algo": algo, "update": update, "step": step, "expert": cfg.expert,
+            "text_table": {k: torch.as_tensor(v).float() for k, v in table.items()},
+            "camera": {k: v for k, v in to_dict(cfg.sim.camera).items() if isinstance(v, int | float | str)}}
+
+
+def load_online(out: Path, info, policy, optimizer):
+    """Resume: weights, optimiser, counters and this rank's state (RNG restored last, by the caller)."""
+    from ovon.train.checkpoint import load_checkpoint
+
+    ckpt = load_checkpoint(out, map_location=info.device)
+    if ckpt["world_size"] != info.world_size:
+        raise ValueError(f"checkpoint was written by {ckpt['world_size']} ranks; this run has {info.world_size}")
+    policy.load_state_dict(ckpt["policy"])
+    optimizer.load_state_dict(ckpt["optimizer"])
+    return ckpt, ckpt["ranks"][info.rank]
+
+
+def write_rank_report(out: Path, info, policy, update: int) -> None:
+    """Per-rank parameter checksum (DDP ranks must agree) - cheap, and what the torchrun test reads."""
+    import json
+
+    d = out / "ranks"
+    d.mkdir(parents=True, exist_ok=True)
+    (d / f"rank{info.rank}.json").write_text(json.dumps(
+        {"rank": info.rank, "world_size": info.world_size, "update": update, "checksum": param_checksum(policy)}))

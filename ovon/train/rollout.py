@@ -154,8 +154,9 @@ class EnvSlot:
         return self.encoder.encode({"rgb": obs["rgb"][None], "depth": obs["depth"][None],
                                     "semantic": obs["semantic"][None]})[0].numpy()
 
-    def step(self, action: int) -> StepOut:
-        """Step; at an episode end the returned observation is the next episode's first (auto-reset)."""
+    def step(self, action: int, auto_reset: bool = True) -> StepOut:
+        """Step; at an episode end the returned observation is the next episode's first (auto-reset),
+        or the final one with `auto_reset=False` (recording)."""
         action = int(action)
         obs, reward, terminated, truncated, info = self.env.step(action)
         self.actions.append(action)
@@ -163,6 +164,8 @@ class EnvSlot:
             metrics = dict(info["metrics"])
             spec = self.cfg.specs[self.spec_index]
             metrics.update(scene=spec.scene, goal=spec.goal_category, episode_id=spec.episode_id)
+            if not auto_reset:
+                return StepOut(self._image(obs), self._goal, -1, float(reward), True, False, metrics)
             out = self.reset()
             out.reward, out.done, out.metrics = float(reward), True, metrics
             return out

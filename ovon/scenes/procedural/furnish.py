@@ -262,7 +262,7 @@ class Furnisher:
             return False
         if self._collides(st, p, ignore):
             return False
-        obstructs = st.obstructs(p)
+        obstructs = st.obstructs(p) and p.support is None  # on a support: inside an obstacle already
         new_blocked = None
         if obstructs:
             for dz in st.door_zones:

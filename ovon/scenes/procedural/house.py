@@ -9,11 +9,12 @@ Algorithm:
    ceiling slab. With a seeded probability a smaller second storey sits at `floor_to_floor` (no stairs).
 2. Furnishing (furnish.py): per room, floor objects by room affinity x frequency (against walls facing
    inward, or free standing), each accepted only when it stays inside the room, overlaps nothing, keeps
-   1 m in front of every doorway clear and leaves the room's free space (0.1 m grid, footprints inflated
-   by 0.2 m) in one piece; then wall objects (flush, not over doors), small objects on `is_surface`
-   tops, and ceiling objects hanging above head height.
+   1 m in front of every doorway clear, leaves either no gap or >= 0.5 m to walls and other obstacles
+   (no slits that turn into dead-end pockets), and keeps the room's free space in one piece on 5 cm
+   grids at clearances 0.17 and 0.22 m; then wall objects (flush, not over doors), small objects on
+   `is_surface` tops, and ceiling objects hanging above head height.
 3. Mesh (shapes.py): one builder per shape family; parts are transformed and concatenated once, with
-   per-face colour (category colour x part shade x orientation shading) and per-face instance id.
+   per-face colour (category colour x part shade; orientation shading only if `bake_shading`) and per-face instance id.
 
 Instance ids: structural parts come first (walls, floors, ceilings: raw labels "wall", "floor",
 "ceiling", category None), then objects; ids start at 1 and are contiguous.

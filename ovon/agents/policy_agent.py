@@ -1,0 +1,88 @@
+"""A trained policy as an evaluation agent (`ovon evaluate --agent policy --checkpoint PATH`).
+
+Loads an `ActorCritic` checkpoint (`policy.pt` written by `ovon train`, or a run folder holding one),
+rebuilds its perception encoders from the stored encoder config and acts with `act_step` (KV cache /
+LSTM state, reset at each episode). The goal-text table saved with the policy is reused, so the goal
+embeddings match training; unseen texts go to the real text encoder.
+
+With the oracle-vl encoder the agent is privileged: it reads the semantic frame and the scene's
+instance -> category map through `observation["privileged"]` (ORACLE PERCEPTION).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+
+class PolicyAgent:
+    def __init__(self, checkpoint: str, deterministic: bool = True, device: str = "cpu", threads: int = 1) -> None:
+        from ovon.models.config import EncoderConfig
+        from ovon.models.policy import ActorCritic
+        from ovon.train.common import TableTextEncoder
+
+        if threads > 0:
+            torch.set_num_threads(threads)
+        path = Path(checkpoint)
+        if path.is_dir():
+            path = path / "policy.pt"
+        self.policy = ActorCritic.load(path, map_location=device).eval()
+        self.device = torch.device(device)
+        self.deterministic = deterministic
+        self.encoder_cfg = self.policy.encoder_cfg or EncoderConfig()
+        extra = getattr(self.policy, "checkpoint_extra", {}) or {}
+        self.text = TableTextEncoder(extra.get("text_table", {}), self.encoder_cfg)
+        self.image_encoder = None
+        if self.encoder_cfg.image != "cnn":
+            from ovon.models.encoders import make_image_encoder
+
+            self.image_encoder = make_image_encoder(self.encoder_cfg, self.text)
+        self.privileged = self.encoder_cfg.image == "oracle-vl"
+        self._gen = torch.Generator().manual_seed(0)
+        self._scene_set = False
+        self._state = None
+        self._prev = torch.full((1,), -1, dtype=torch.long)
+        self._first = True
+
+    def reset(self, episode_info: dict) -> None:
+        self._state = self.policy.init_state(1, self.device)
+        self._prev = torch.full((1,), -1, dtype=torch.long, device=self.device)
+        self._first = True
+        self._scene_set = False
+        self._gen.manual_seed(int(episode_info.get("seed", 0)))
+        if self.image_encoder is not None and hasattr(self.image_encoder, "reseed"):
+            self.image_encoder.reseed(int(episode_info.get("seed", 0)))
+
+    def _image(self, observation: dict) -> torch.Tensor:
+        if self.image_encoder is None:
+            batch = {"rgb": torch.from_numpy(np.ascontiguousarray(observation["rgb"]))[None].to(self.device),
+                     "depth": torch.from_numpy(np.asarray(observation["depth"], np.float32))[None].to(self.device)}
+            return self.policy.encode_images(batch)
+        if self.privileged:
+            p = observation["privileged"]
+            if not self._scene_set:
+                self.image_encoder.set_scene({o.id: o.category for o in p.world.scene.objects if o.category})
+                self._scene_set = True
+            batch = {"semantic": p.frame.semantic[None]}
+        else:
+            batch = {"rgb": observation["rgb"][None], "depth": observation["depth"][None]}
+        return self.image_encoder.encode(batch).to(self.device)
+
+    @torch.no_grad()
+    def act(self, observation: dict) -> int:
+        if self._state is None:
+            self.reset({})
+        goal = self.text.encode([observation["goal"]]).to(self.device)
+        obs = self.policy.make_obs(self._image(observation).float(), goal)
+        first = torch.tensor([self._first], device=self.device)
+        logits, _, self._state = self.policy.act_step(obs, self._prev, self._state, first)
+        if self.deterministic:
+            action = int(logits.argmax(-1).item())
+        else:
+            probs = torch.softmax(logits.float(), -1).cpu()
+            action = int(torch.multinomial(probs, 1, generator=self._gen).item())
+        self._prev = torch.tensor([action], device=self.device)
+        self._first = False
+        return action

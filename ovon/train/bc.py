@@ -1,0 +1,271 @@
+"""Behaviour cloning: record expert trajectories (frontier or shortest-path expert) as shards, then
+cross-entropy training on episode chunks of at most `policy.context` steps.
+
+Shards (`shard_00000.pt`, written atomically, one recording job each) hold per-step frozen-encoder
+embeddings (float16) or, for a trainable CNN, the frames; plus previous actions, expert actions and
+episode boundaries - so training never touches a simulator. Chunks are shuffled with a permutation
+that depends only on (seed, epoch), so a resumed run sees the same batches as an uninterrupted one.
+
+    python -m ovon.cli.main train --algo bc --preset cpu-small --data D --scenes S --out runs/bc
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ovon.config.base import to_dict
+from ovon.task.episode import EpisodeSpec
+from ovon.train import distributed as dist
+from ovon.train.checkpoint import atomic_torch_save, seed_everything, set_rng_state
+from ovon.train.common import (
+    build_train_policy,
+    load_init_policy,
+    load_online,
+    rank_text_table,
+    save_online,
+    set_threads,
+    write_rank_report,
+)
+from ovon.train.config import TrainConfig, reward_for
+from ovon.train.logging import RunLogger
+
+SHARD_FORMAT = "ovon-bc-shard-v1"
+
+
+# ----- recording ----------------------------------------------------------------------------------
+def _record_job(job: dict) -> dict:
+    """Worker: run the expert on a list of (spec, seed) episodes of one scene and write one shard."""
+    from ovon.parallel import init_worker
+    from ovon.train.rollout import EnvSlot, SlotConfig
+
+    init_worker()
+    path = Path(job["path"])
+    if path.exists():
+        return {"path": str(path), "episodes": -1}
+    slot = EnvSlot(SlotConfig(job["specs"], job["sim"], job["task"], job["encoder"], job["table"],
+                              job["expert"], job["seed"]))
+    images: list[Any] = []
+    prev, act, ep_of, lengths, goals, goal_text, metrics = [], [], [], [], [], [], []
+    try:
+        for spec_index, seed in job["items"]:
+            try:
+                out = slot._start(spec_index, seed)
+            except ValueError:  # no reachable goal from this floor: skip the episode
+                continue
+            e = len(lengths)
+            goals.append(out.goal)
+            goal_text.append(job["specs"][spec_index].goal_category)
+            n, last = 0, -1
+            while not out.done:
+                images.append(out.image)
+                prev.append(last)
+                act.append(out.label)
+                ep_of.append(e)
+                last = out.label
+                n += 1
+                out = slot.step(out.label, auto_reset=False)
+            lengths.append(n)
+            metrics.append(out.metrics)
+    finally:
+        slot.close()
+    if not lengths:
+        return {"path": str(path), "episodes": 0}
+    shard: dict[str, Any] = {
+        "format": SHARD_FORMAT,
+        "goal": torch.from_numpy(np.stack(goals).astype(np.float32)),
+        "goal_text": goal_text,
+        "episode": torch.tensor(ep_of, dtype=torch.long),
+        "prev_action": torch.tensor(prev, dtype=torch.long),
+        "action": torch.tensor(act, dtype=torch.long),
+        "lengths": torch.tensor(lengths, dtype=torch.long),
+        "metrics": metrics,
+        "meta": {"expert": job["expert"], "encoder": to_dict(job["encoder"]), "sim": to_dict(job["sim"])},
+    }
+    if isinstance(images[0], dict):
+        shard["rgb"] = torch.from_numpy(np.stack([i["rgb"] for i in images]))
+        shard["depth"] = torch.from_numpy(np.stack([i["depth"] for i in images]).astype(np.float16))
+    else:
+        shard["image"] = torch.from_numpy(np.stack(images).astype(np.float16))
+    atomic_torch_save(shard, path)
+    return {"path": str(path), "episodes": len(lengths), "steps": len(act),
+            "success": float(np.mean([m["success"] for m in metrics]))}
+
+
+def record_shards(cfg: TrainConfig, specs: list[EpisodeSpec], shard_dir: str | Path, table: dict,
+                  episodes: int | None = None, workers: int | None = None, progress: bool = False) -> list[dict]:
+    """Record `episodes` expert episodes (specs cycled, seeded) into shards of `bc.episodes_per_shard`,
+    grouped by scene (one world load per shard). Existing shards are kept (resumable)."""
+    from ovon.parallel import progress_bar, run_jobs
+
+    shard_dir = Path(shard_dir)
+    shard_dir.mkdir(parents=True, exist_ok=True)
+    episodes = cfg.bc.record_episodes if episodes is None else episodes
+    rng = np.random.default_rng(cfg.seed)
+    order = rng.permutation(len(specs))
+    items = [(int(order[i % len(specs)]), int(rng.integers(2**31 - 1))) for i in range(episodes)]
+    by_scene: dict[str, list[tuple[int, int]]] = {}
+    for it in items:
+        by_scene.setdefault(specs[it[0]].scene, []).append(it)
+    jobs = []
+    tab = {k: np.asarray(v, dtype=np.float32) for k, v in table.items()}
+    for scene in sorted(by_scene):
+        its = by_scene[scene]
+        for i in range(0, len(its), cfg.bc.episodes_per_shard):
+            part = its[i : i + cfg.bc.episodes_per_shard]
+            idx = sorted({p[0] for p in part})
+            remap = {old: new for new, old in enumerate(idx)}
+            jobs.append({"path": str(shard_dir / f"shard_{len(jobs):05d}.pt"), "specs": [specs[j] for j in idx],
+                         "items": [(remap[a], s) for a, s in part], "sim": cfg.sim, "task": reward_for(cfg, False),
+                         "encoder": cfg.encoder, "table": tab, "expert": cfg.expert, "seed": cfg.seed + len(jobs)})
+    results = []
+    with progress_bar("recording expert shards", len(jobs), progress) as bar:
+        for r in run_jobs(_record_job, jobs, workers=cfg.bc.record_workers if workers is None else workers):
+            results.append(r)
+            bar.advance()
+    return results
+
+
+# ----- dataset of chunks --------------------------------------------------------------------------
+@dataclasses.dataclass
+class ChunkData:
+    """All shards concatenated; `chunks` (C, 2) = (first step index, length <= context)."""
+
+    image: Any  # (N, Di) float16 tensor, or {"rgb": (N,H,W,3), "depth": (N,H,W)}
+    goal: torch.Tensor  # (E, Dg)
+    episode: torch.Tensor  # (N,) global episode index
+    prev_action: torch.Tensor  # (N,)
+    action: torch.Tensor  # (N,)
+    start: torch.Tensor  # (N,) bool: first step of an episode
+    chunks: torch.Tensor  # (C, 2)
+    meta: dict
+
+    @property
+    def image_dim(self) -> int | None:
+        return int(self.image.shape[-1]) if isinstance(self.image, torch.Tensor) else None
+
+
+def load_shards(shard_dir: str | Path, context: int) -> ChunkData:
+    paths = sorted(Path(shard_dir).glob("shard_*.pt"))
+    if not paths:
+        raise FileNotFoundError(f"no BC shards (shard_*.pt) in {shard_dir}")
+    parts = [torch.load(p, weights_only=False) for p in paths]
+    for p, s in zip(paths, parts):
+        if s.get("format") != SHARD_FORMAT:
+            raise ValueError(f"{p} is not a BC shard ({SHARD_FORMAT})")
+    offsets = np.cumsum([0] + [len(s["lengths"]) for s in parts])
+    episode = torch.cat([s["episode"] + int(o) for s, o in zip(parts, offsets)])
+    if "image" in parts[0]:
+        image: Any = torch.cat([s["image"] for s in parts])
+    else:
+        image = {k: torch.cat([s[k] for s in parts]) for k in ("rgb", "depth")}
+    lengths = torch.cat([s["lengths"] for s in parts])
+    first = torch.cat([torch.zeros(1, dtype=torch.long), lengths.cumsum(0)[:-1]])
+    start = torch.zeros(len(episode), dtype=torch.bool)
+    start[first] = True
+    chunks = [(int(f) + a, min(context, int(n) - a)) for f, n in zip(first, lengths) for a in range(0, int(n), context)]
+    return ChunkData(image, torch.cat([s["goal"] for s in parts]), episode,
+                     torch.cat([s["prev_action"] for s in parts]), torch.cat([s["action"] for s in parts]),
+                     start, torch.tensor(chunks, dtype=torch.long).reshape(-1, 2), parts[0].get("meta", {}))
+
+
+def make_batch(data: ChunkData, chunk_ids: torch.Tensor, device: torch.device) -> dict[str, Any]:
+    """Pad the chosen chunks to the longest: image (B,L,...), goal (B,L,Dg), prev/act (B,L), starts, mask."""
+    c = data.chunks[chunk_ids]
+    L = int(c[:, 1].max())
+    ar = torch.arange(L)
+    mask = ar[None, :] < c[:, 1:2]
+    idx = torch.where(mask, c[:, :1] + ar[None, :], c[:, :1])
+    if isinstance(data.image, torch.Tensor):
+        image: Any = data.image[idx].to(device).float()
+    else:
+        image = {k: v[idx].to(device) for k, v in data.image.items()}
+    return {"image": image, "goal": data.goal[data.episode[idx]].to(device), "prev": data.prev_action[idx].to(device),
+            "starts": data.start[idx].to(device), "action": data.action[idx].to(device), "mask": mask.to(device)}
+
+
+def epoch_permutation(n: int, seed: int, epoch: int) -> torch.Tensor:
+    g = torch.Generator().manual_seed(seed * 1_000_003 + epoch)
+    return torch.randperm(n, generator=g)
+
+
+# ----- training -----------------------------------------------------------------------------------
+def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | Path, resume: bool = False,
+             init: str | None = None) -> dict:
+    """Record shards if missing (needs `specs`), then train; returns the last logged metrics."""
+    from ovon.train.common import features
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    info = dist.setup(cfg.device)
+    set_threads(cfg.threads)
+    seed_everything(cfg.seed + 7919 * info.rank)
+    dev = info.device
+    shard_dir = Path(cfg.bc.shards) if cfg.bc.shards else out / "shards"
+    table: dict = {}
+    if not list(shard_dir.glob("shard_*.pt")):
+        if not specs:
+            raise ValueError(f"no BC shards in {shard_dir} and no episodes to record them from (--data/--scenes)")
+        table = rank_text_table(cfg, specs, out, info)
+        if info.is_main:
+            record_shards(cfg, specs, shard_dir, table, progress=cfg.progress)
+        dist.barrier(info)
+    elif specs or cfg.text_cache:
+        table = rank_text_table(cfg, specs or [], out, info)
+    data = load_shards(shard_dir, cfg.policy.context if not init else load_init_policy(init, cfg.encoder).cfg.context)
+    text_dim = int(data.goal.shape[-1])
+    if init:
+        policy = load_init_policy(init, cfg.encoder)
+        cfg = dataclasses.replace(cfg, policy=policy.cfg, encoder=policy.encoder_cfg or cfg.encoder)
+    else:
+        policy = build_train_policy(cfg.policy, cfg.encoder, data.image_dim or cfg.encoder.cnn_dim, text_dim)
+    policy.text_table = table
+    policy.to(dev)
+    model = dist.wrap(policy, info)
+    optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
+    B, W = cfg.bc.batch_chunks, info.world_size
+    n_chunks = len(data.chunks)
+    per_epoch = max(1, n_chunks // (B * W))
+    total = cfg.max_updates if cfg.max_updates > 0 else cfg.bc.epochs * per_epoch
+    start_update, step = 0, 0
+    if resume and (out / "checkpoint.pt").exists():
+        ckpt, mine = load_online(out, info, policy, optimizer)
+        start_update, step = ckpt["update"], ckpt["step"]
+        set_rng_state(mine["rng"])
+    logger = RunLogger(out, total, "bc", info.is_main, cfg.progress, start_update, step)
+    last: dict = {}
+    try:
+        for update in range(start_update, total):
+            t0 = time.perf_counter()
+            epoch, k = divmod(update, per_epoch)
+            perm = epoch_permutation(n_chunks, cfg.seed, epoch)
+            lo = (k * W + info.rank) * B
+            ids = perm[torch.arange(lo, lo + B) % n_chunks]
+            b = make_batch(data, ids, dev)
+            obs = policy.make_obs(features(policy, b["image"]), b["goal"])
+            logits, values = model(obs, b["prev"], b["starts"])
+            m = b["mask"]
+            loss = F.cross_entropy(logits[m], b["action"][m]) + 0.0 * values.sum()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)
+            optimizer.step()
+            step += int(m.sum()) * W
+            acc = (logits[m].argmax(-1) == b["action"][m]).float().mean()
+            scalars = dist.all_reduce_mean({"loss": loss.item(), "accuracy": acc.item(),
+                                            "grad_norm": float(grad_norm)}, info)
+            if (update + 1) % cfg.log_every == 0 or update + 1 == total:
+                last = {**scalars, "epoch": float(epoch), "time/update_s": time.perf_counter() - t0}
+                logger.log(update + 1, step, last)
+            if (update + 1) % cfg.checkpoint_every == 0 or update + 1 == total:
+                save_online(out, info, cfg, "bc", policy, optimizer, update + 1, step, {})
+        write_rank_report(out, info, policy, total)
+    finally:
+        logger.close()
+    return last

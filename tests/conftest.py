@@ -1,0 +1,60 @@
+"""Shared fixtures: a tiny embedded world (3 procedural houses in the HM3D layout) and its val episodes,
+built once per test session and reused by the dataset, evaluation and report tests."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("LP_NUM_THREADS", "0")
+
+try:
+    import torch
+
+    torch.set_num_threads(1)
+except ImportError:  # pragma: no cover
+    pass
+
+TINY_HOUSES = {"train": [11], "val": [21, 22]}
+
+
+def tiny_generation_config():
+    from ovon.config.dataset import fast_generation
+
+    g = fast_generation()
+    return replace(
+        g,
+        episodes_per_train_scene=12,
+        episodes_per_val_split=16,
+        viewpoints=replace(g.viewpoints, render_size=48, max_viewpoints=6),
+    )
+
+
+def write_tiny_scenes(root: Path) -> Path:
+    from ovon.scenes.hm3dsem import write_scene
+    from ovon.scenes.procedural import HouseConfig, generate_house
+
+    cfg = HouseConfig(min_rooms=4, max_rooms=5, second_floor_prob=0.0)
+    for split, seeds in TINY_HOUSES.items():
+        for seed in seeds:
+            scene = generate_house(seed, cfg=cfg)
+            write_scene(scene, root / split / scene.scene_id)
+    return root
+
+
+@pytest.fixture(scope="session")
+def tiny_scenes(tmp_path_factory) -> Path:
+    return write_tiny_scenes(tmp_path_factory.mktemp("world") / "ovon_world")
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tiny_scenes, tmp_path_factory) -> Path:
+    from ovon.dataset.generate import VAL_SPLITS, generate
+
+    out = tmp_path_factory.mktemp("episodes") / "ovon_episodes"
+    generate(tiny_scenes, out, tiny_generation_config(), splits=VAL_SPLITS, workers=1, progress=False)
+    return out

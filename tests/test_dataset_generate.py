@@ -1,0 +1,108 @@
+"""Episode generation: constraints (checked by `validate`, not the generator), splits, determinism,
+resumability after a kill."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ovon.dataset.generate import VAL_SPLITS, generate, largest_remainder
+from ovon.dataset.io import EpisodeDataset, goals_for
+from ovon.dataset.stats import dataset_stats
+from ovon.dataset.validate import validate_dataset
+from tests.conftest import tiny_generation_config
+
+
+def shard_bytes(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.glob("*/content/*.json.gz"))}
+
+
+def test_generated_val_splits_validate(tiny_dataset, tiny_scenes):
+    rep = validate_dataset(tiny_dataset, tiny_scenes)
+    assert rep.ok, rep.errors[:5]
+    assert rep.episodes > 20
+    stats = dataset_stats(tiny_dataset)
+    for split in VAL_SPLITS:
+        st = stats["splits"][split]
+        assert st["episodes"] > 0, split
+        assert 1.0 <= st["geodesic_distance"]["min"] and st["geodesic_distance"]["max"] <= 30.0
+
+
+def test_episode_schema_and_goals(tiny_dataset):
+    ds = EpisodeDataset(tiny_dataset, "val_seen")
+    for scene in ds.scenes():
+        shard = ds.load_scene(scene)
+        for ep in shard.episodes:
+            assert ep.scene_id.startswith("ovon_world/val/") and ep.scene_id.endswith(".glb")
+            assert ep.start_rotation[0] == 0.0 and ep.start_rotation[2] == 0.0
+            goals = goals_for(ep, shard.goals_by_category)
+            assert goals and all(g.view_points for g in goals)
+            for g in goals:
+                ious = [v.iou for v in g.view_points]
+                assert ious == sorted(ious, reverse=True) and min(ious) > 0.05
+
+
+def test_category_split_is_written_and_respected(tiny_dataset):
+    cats = json.loads((tiny_dataset / "categories.json").read_text())
+    train = set(cats["train"])
+    syn = {c["category"] for c in cats["val_seen_synonyms"]}
+    uns = {c["category"] for c in cats["val_unseen"]}
+    assert not (train & syn) and not (train & uns) and not (syn & uns)
+    assert all(c["max_similarity"] >= 0.68 for c in cats["val_seen_synonyms"])
+    assert all(c["max_similarity"] < 0.68 for c in cats["val_unseen"])
+    for split, allowed in (("val_seen", train), ("val_seen_synonyms", syn), ("val_unseen", uns)):
+        for ep in EpisodeDataset(tiny_dataset, split).iter_episodes():
+            assert ep.object_category in allowed
+            assert set(ep.children_object_categories) <= allowed
+
+
+def test_val_allocation_is_proportional_to_scene_counts():
+    # pairs (scene, category): a category in two scenes gets twice the episodes of one in one scene
+    alloc = largest_remainder(6, [("a", "couch"), ("b", "couch"), ("a", "bed")])
+    assert sum(alloc.values()) == 6
+    assert alloc[("a", "couch")] + alloc[("b", "couch")] == 4 and alloc[("a", "bed")] == 2
+
+
+def test_same_seed_gives_identical_shards_and_rerun_skips(tiny_dataset, tiny_scenes, tmp_path):
+    out = tmp_path / "again"
+    generate(tiny_scenes, out, tiny_generation_config(), splits=("val_seen",), workers=1, progress=False,
+             category_split_path=tiny_dataset / "categories.json")
+    ref = {k: v for k, v in shard_bytes(tiny_dataset).items() if k.startswith("val_seen/")}
+    assert shard_bytes(out) == ref
+    mtimes = {p: p.stat().st_mtime_ns for p in out.glob("*/content/*.json.gz")}
+    rep = generate(tiny_scenes, out, tiny_generation_config(), splits=("val_seen",), workers=1, progress=False)
+    assert rep.episodes == {}  # nothing new
+    assert {p: p.stat().st_mtime_ns for p in out.glob("*/content/*.json.gz")} == mtimes
+
+
+def test_kill_during_generation_then_rerun_completes(tiny_dataset, tiny_scenes, tmp_path):
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "ovon.cli.main", "dataset", "generate", "--scenes", str(tiny_scenes),
+           "--out", str(out), "--workers", "1", "--no-progress", "--categories",
+           str(tiny_dataset / "categories.json"), "--split", "val_seen",
+           "--set", "episodes_per_val_split=16", "--set", "episodes_per_train_scene=12",
+           "--set", "viewpoints.render_size=48", "--set", "viewpoints.max_viewpoints=6"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list((out / ".cache" / "goals").glob("*.json.gz")):
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not list(out.glob("val_seen/content/*.json.gz")), "killed before any shard was written"
+    rc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert rc.returncode == 0, rc.stderr[-2000:]
+    ref = {k: v for k, v in shard_bytes(tiny_dataset).items() if k.startswith("val_seen/")}
+    assert shard_bytes(out) == ref  # nothing missing, nothing duplicated, same bytes
+    assert not [p for p in out.rglob("*.tmp")]
+
+
+def test_unknown_split_and_missing_scenes_are_clear_errors(tmp_path):
+    with pytest.raises(ValueError, match="unknown split"):
+        generate(tmp_path, tmp_path / "o", tiny_generation_config(), splits=("val_nope",))
+    with pytest.raises(FileNotFoundError, match="no scenes under"):
+        generate(tmp_path, tmp_path / "o", tiny_generation_config(), splits=("val_seen",))

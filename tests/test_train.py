@@ -1,0 +1,261 @@
+"""Training: exact resume, torchrun/DDP, BC overfitting, DAgger/PPO end to end, the policy agent."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+torch.set_num_threads(1)
+
+from ovon.train.bc import SHARD_FORMAT  # noqa: E402
+from ovon.train.common import adhoc_specs, needed_texts, write_text_table  # noqa: E402
+from ovon.train.config import TrainConfig, train_preset  # noqa: E402
+from ovon.train.logging import read_metrics  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+GOALS = ["couch", "bed", "toilet", "sink"]
+
+
+def _hash_vec(text: str, dim: int = 16) -> np.ndarray:
+    return np.random.default_rng(zlib.crc32(text.encode())).standard_normal(dim).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def house_specs():
+    return adhoc_specs([0], categories=GOALS)
+
+
+@pytest.fixture(scope="module")
+def table_path(tmp_path_factory, house_specs) -> str:
+    """A hash text table covering the vocabulary: no language model is loaded in these tests."""
+    path = tmp_path_factory.mktemp("text") / "table.pt"
+    write_text_table(path, {t: _hash_vec(t) for t in needed_texts(house_specs)})
+    return str(path)
+
+
+def write_synthetic_shards(folder: Path, episodes: int = 6, image_dim: int = 12, text_dim: int = 8,
+                           seed: int = 0) -> Path:
+    """Random embeddings with a learnable rule (action = argmax of the first 6 image dims)."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir(parents=True, exist_ok=True)
+    for s in range(2):
+        lengths = rng.integers(5, 30, size=episodes // 2)
+        n = int(lengths.sum())
+        image = rng.standard_normal((n, image_dim)).astype(np.float16)
+        action = image[:, :6].astype(np.float32).argmax(1)
+        episode = np.repeat(np.arange(len(lengths)), lengths)
+        prev = np.concatenate([np.r_[-1, action[o:o + n_][:-1]]
+                               for o, n_ in zip(np.r_[0, np.cumsum(lengths)[:-1]], lengths)])
+        torch.save({"format": SHARD_FORMAT, "image": torch.from_numpy(image),
+                    "goal": torch.from_numpy(rng.standard_normal((len(lengths), text_dim)).astype(np.float32)),
+                    "goal_text": ["x"] * len(lengths), "episode": torch.from_numpy(episode),
+                    "prev_action": torch.from_numpy(prev).long(), "action": torch.from_numpy(action).long(),
+                    "lengths": torch.from_numpy(lengths).long(), "metrics": [{}] * len(lengths), "meta": {}},
+                   folder / f"shard_{s:05d}.pt")
+    return folder
+
+
+def _losses(out: Path) -> list[float]:
+    return [r["loss"] for r in read_metrics(out)]
+
+
+# ----- checkpoint / resume ---------------------------------------------------------------------------
+def test_bc_resume_reproduces_losses(tmp_path: Path) -> None:
+    from ovon.train import train
+
+    shards = write_synthetic_shards(tmp_path / "shards")
+    cfg = train_preset("tiny", algo="bc", max_updates=8, checkpoint_every=2)
+    cfg = dataclasses.replace(cfg, bc=dataclasses.replace(cfg.bc, shards=str(shards), batch_chunks=3))
+    train(cfg, None, tmp_path / "straight")
+    train(dataclasses.replace(cfg, max_updates=4), None, tmp_path / "split")
+    train(cfg, None, tmp_path / "split", resume=True)
+    a, b = _losses(tmp_path / "straight"), _losses(tmp_path / "split")
+    assert len(a) == len(b) == 8
+    assert a == b
+    from ovon.models.policy import ActorCritic
+
+    pa, pb = ActorCritic.load(tmp_path / "straight" / "policy.pt"), ActorCritic.load(tmp_path / "split" / "policy.pt")
+    for (_, x), (_, y) in zip(pa.state_dict().items(), pb.state_dict().items()):
+        assert torch.equal(x, y)
+
+
+def test_dagger_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str) -> None:
+    from ovon.train import train
+
+    cfg = train_preset("tiny", algo="dagger", expert="shortest-path", num_envs=1, rollout_steps=6,
+                       max_updates=4, text_cache=table_path)
+    train(cfg, house_specs, tmp_path / "straight")
+    train(dataclasses.replace(cfg, max_updates=2), house_specs, tmp_path / "split")
+    train(cfg, house_specs, tmp_path / "split", resume=True)
+    a, b = _losses(tmp_path / "straight"), _losses(tmp_path / "split")
+    assert len(a) == 4 and a == b
+
+
+def test_atomic_checkpoint_leaves_no_temp(tmp_path: Path) -> None:
+    from ovon.train.checkpoint import load_checkpoint, rng_state, save_checkpoint, set_rng_state
+
+    save_checkpoint(tmp_path, {"update": 3, "ranks": [{"rng": rng_state()}]})
+    x = torch.rand(3)
+    ck = load_checkpoint(tmp_path)
+    set_rng_state(ck["ranks"][0]["rng"])
+    assert torch.equal(torch.rand(3), x)
+    assert [p.name for p in tmp_path.iterdir()] == ["checkpoint.pt"]
+
+
+# ----- distributed ------------------------------------------------------------------------------------
+def test_torchrun_two_ranks_stay_in_sync(tmp_path: Path) -> None:
+    shards = write_synthetic_shards(tmp_path / "shards", episodes=8)
+    out = tmp_path / "run"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
+           "-m", "ovon.cli.main", "train", "--algo", "bc", "--preset", "tiny", "--out", str(out),
+           "--set", f"bc.shards={shards}", "--set", "max_updates=3", "--set", "bc.batch_chunks=2"]
+    r = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    if r.returncode != 0 and any(s in r.stderr for s in ("EADDRINUSE", "address already in use", "bind")):
+        pytest.skip(f"cannot bind a rendezvous port: {r.stderr[-300:]}")
+    assert r.returncode == 0, r.stderr[-3000:]
+    ranks = [json.loads((out / "ranks" / f"rank{i}.json").read_text()) for i in range(2)]
+    assert [x["world_size"] for x in ranks] == [2, 2]
+    assert ranks[0]["checksum"] == ranks[1]["checksum"]
+    assert len(read_metrics(out)) == 3  # rank 0 only logs
+    from ovon.train.checkpoint import load_checkpoint
+
+    assert len(load_checkpoint(out)["ranks"]) == 2
+
+
+# ----- learning ---------------------------------------------------------------------------------------
+def test_bc_overfits_recorded_expert_episodes(tmp_path: Path, house_specs, table_path: str) -> None:
+    from ovon.train import train
+    from ovon.train.bc import load_shards
+
+    cfg = train_preset("tiny", algo="bc", expert="shortest-path", max_updates=300, checkpoint_every=1000,
+                       lr=3e-3, text_cache=table_path)
+    cfg = dataclasses.replace(cfg, bc=dataclasses.replace(cfg.bc, record_episodes=3, episodes_per_shard=2,
+                                                          batch_chunks=8),
+                              policy=dataclasses.replace(cfg.policy, context=64))  # whole episodes in context
+    last = train(cfg, house_specs, tmp_path / "bc")
+    data = load_shards(tmp_path / "bc" / "shards", cfg.policy.context)
+    assert len(data.chunks) >= 3 and int(data.start.sum()) == 3
+    losses = _losses(tmp_path / "bc")
+    assert losses[0] > 1.0
+    assert last["loss"] < 0.05, losses[-10:]
+    assert last["accuracy"] > 0.97, last
+
+
+# ----- DAgger / PPO end to end + the policy agent -----------------------------------------------------
+def test_dagger_then_ppo_finetune_then_agent(tmp_path: Path, house_specs, table_path: str) -> None:
+    from ovon.agents import make_agent
+    from ovon.evaluate.runner import run_episode
+    from ovon.sim.env import ObjectNavEnv
+    from ovon.train import train
+
+    cfg = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table_path)
+    train(cfg, house_specs, tmp_path / "dagger")
+    for name in ("checkpoint.pt", "policy.pt", "metrics.jsonl"):
+        assert (tmp_path / "dagger" / name).is_file()
+    assert list((tmp_path / "dagger" / "tb").glob("events.out.tfevents.*"))
+    assert [r["update"] for r in read_metrics(tmp_path / "dagger")] == [1, 2]
+
+    ft = dataclasses.replace(cfg, algo="ppo")
+    last = train(ft, house_specs, tmp_path / "ft", init=str(tmp_path / "dagger"))
+    assert last["lr/actor"] == 0.0 and last["lr/critic"] > 0
+    assert list((tmp_path / "ft" / "tb").glob("events.out.tfevents.*"))
+    from ovon.models.policy import ActorCritic
+
+    before, after = ActorCritic.load(tmp_path / "dagger" / "policy.pt"), ActorCritic.load(tmp_path / "ft" / "policy.pt")
+    assert torch.equal(before.prev_action_emb.weight, after.prev_action_emb.weight)  # frozen
+    assert torch.equal(before.action_head.weight, after.action_head.weight)  # actor lr 0 so far
+    assert not torch.equal(before.critic_head.weight, after.critic_head.weight)
+
+    agent = make_agent("policy", checkpoint=str(tmp_path / "ft" / "policy.pt"))
+    assert agent.privileged
+    env = ObjectNavEnv(episodes=house_specs[:1], sim=cfg.sim, task=cfg.task)
+    rec = run_episode(env, agent, house_specs[0], seed=0)
+    env.close()
+    assert 1 <= rec["steps"] <= cfg.task.max_steps
+
+
+def test_ppo_from_scratch_lstm(tmp_path: Path, house_specs, table_path: str) -> None:
+    from ovon.train import train
+
+    cfg = train_preset("tiny", algo="ppo", text_cache=table_path)
+    cfg = dataclasses.replace(cfg, policy=dataclasses.replace(cfg.policy, core="lstm"))
+    last = train(cfg, house_specs, tmp_path / "ppo")
+    assert np.isfinite(last["loss"]) and "lr/all" in last
+    assert (tmp_path / "ppo" / "policy.pt").is_file()
+
+
+def test_vec_env_workers_match_in_process(house_specs, table_path: str) -> None:
+    from ovon.train.common import text_table
+    from ovon.train.rollout import make_vec_env
+
+    cfg = train_preset("tiny", algo="dagger", expert="shortest-path", num_envs=2, text_cache=table_path)
+    table = text_table(cfg.encoder, needed_texts(house_specs), table_path, write=False)
+    runs = []
+    for workers in (0, 2):
+        envs = make_vec_env(dataclasses.replace(cfg, env_workers=workers), house_specs, cfg.task, table, True, 0)
+        try:
+            b = envs.reset()
+            seq = [(b.image.clone(), b.label.clone())]
+            for _ in range(5):
+                b = envs.step(torch.tensor([1, 2]))
+                seq.append((b.image.clone(), b.label.clone()))
+            runs.append(seq)
+        finally:
+            envs.close()
+    for (ia, la), (ib, lb) in zip(*runs):
+        assert torch.equal(ia, ib) and torch.equal(la, lb)
+
+
+# ----- schedule / config / CLI ------------------------------------------------------------------------
+def test_finetune_schedule_matches_baselines() -> None:
+    from ovon.train.config import FinetuneConfig
+    from ovon.train.ppo import finetune_lrs
+
+    ft = FinetuneConfig()
+    assert finetune_lrs(ft, 0) == (2.5e-4, 0.0)
+    assert finetune_lrs(ft, 500) == (2.5e-4, 0.0)
+    c, a = finetune_lrs(ft, 750)
+    assert c == pytest.approx((2.5e-4 + 1.5e-5) / 2) and a == 0.0
+    c, a = finetune_lrs(ft, 875)
+    assert a == pytest.approx(1.5e-5 / 2)
+    assert finetune_lrs(ft, 1000) == pytest.approx((1.5e-5, 1.5e-5))
+    assert finetune_lrs(ft, 5000) == pytest.approx((1.5e-5, 1.5e-5))
+    half = dataclasses.replace(ft, scale=0.5)
+    assert finetune_lrs(half, 500) == pytest.approx((1.5e-5, 1.5e-5))
+
+
+def test_paper_preset_has_upstream_hyperparameters() -> None:
+    cfg = train_preset("paper")
+    assert (cfg.num_envs, cfg.rollout_steps, cfg.ppo.epochs, cfg.ppo.minibatches) == (32, 100, 1, 2)
+    assert (cfg.lr, cfg.adam_eps, cfg.max_grad_norm) == (2.5e-4, 1e-5, 0.2)
+    assert (cfg.ppo.entropy_coef, cfg.ppo.clip, cfg.ppo.value_coef, cfg.ppo.gamma, cfg.ppo.gae_lambda) == (
+        0.01, 0.2, 0.5, 0.99, 0.95)
+    assert cfg.total_steps == 150_000_000 and cfg.policy.context == 100 and cfg.encoder.image == "siglip"
+
+
+def test_cli_config_overrides() -> None:
+    import argparse
+
+    from ovon.cli.train import build_config, register
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(["train", "--algo", "ppo", "--policy", "lstm", "--encoder", "cnn", "--preset", "tiny",
+                              "--set", "ppo.clip=0.1", "--set", "num_envs=3", "--out", "x"])
+    cfg = build_config(args)
+    assert isinstance(cfg, TrainConfig)
+    assert (cfg.algo, cfg.policy.core, cfg.encoder.image, cfg.ppo.clip, cfg.num_envs) == ("ppo", "lstm", "cnn", 0.1, 3)
+    from ovon.config.base import ConfigError
+
+    with pytest.raises(ConfigError):
+        build_config(parser.parse_args(["train", "--algo", "bc", "--set", "nope=1", "--out", "x"]))
