@@ -10,7 +10,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from test_env_scene import objects_scene, small_sim
 
 import ovon  # noqa: F401  (registers the env)
 from ovon.config.sim import NoiseConfig
@@ -18,6 +17,7 @@ from ovon.config.task import TaskConfig
 from ovon.sim.agent import LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.sim.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
+from tests.test_env_scene import objects_scene, small_sim
 
 SCENE = objects_scene()
 
@@ -235,3 +235,22 @@ def test_vector_env_two_workers(shared_memory):
         np.testing.assert_array_equal(info["position"], pos0)  # seeded resets repeat
     finally:
         vec.close()
+
+
+def test_cli_sim_view_and_bench(tmp_path, capsys):
+    from PIL import Image
+
+    from ovon.cli.main import main
+
+    out = tmp_path / "frame.png"
+    assert main(["sim", "view", "procedural:0", "--width", "40", "--height", "30", "--out", str(out)]) == 0
+    assert Image.open(out).size == (120, 30)
+    out2 = tmp_path / "posed.png"
+    assert main(["sim", "view", "procedural:0", "--pose", "2.4,0,4.3,-90", "--pitch", "-30", "--width", "40",
+                 "--height", "30", "--hfov", "90", "--backend", "embree", "--out", str(out2)]) == 0
+    assert main(["sim", "view", "procedural:0", "--pose", "1,2", "--out", str(out2)]) == 2
+    capsys.readouterr()
+    assert main(["sim", "bench", "--width", "40", "--height", "30", "--steps", "30"]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    value, unit = last.split(" ", 1)
+    assert unit == "steps/s" and float(value) > 0

@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 import pytest
-from meshes import box, room_boxes
 
 from ovon.config.sim import AgentConfig, CameraConfig, SimConfig
 from ovon.config.task import TaskConfig
@@ -20,6 +19,7 @@ from ovon.scenes.model import Mesh, ObjectInstance, Scene
 from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.sim.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec
+from tests.meshes import box, room_boxes
 
 COUCH_ID, TOASTER_ID = 1, 2
 COUCH_BOX = ((0.3, 0.0, 0.2), (1.5, 0.8, 0.9))

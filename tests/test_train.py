@@ -88,10 +88,12 @@ def test_bc_resume_reproduces_losses(tmp_path: Path) -> None:
         assert torch.equal(x, y)
 
 
-def test_dagger_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str) -> None:
+@pytest.mark.parametrize("algo", ["dagger", "ppo"])
+def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
+    """Envs replay their current episode, the acting memory and every RNG are restored."""
     from ovon.train import train
 
-    cfg = train_preset("tiny", algo="dagger", expert="shortest-path", num_envs=1, rollout_steps=6,
+    cfg = train_preset("tiny", algo=algo, expert="shortest-path", num_envs=1, rollout_steps=6,
                        max_updates=4, text_cache=table_path)
     train(cfg, house_specs, tmp_path / "straight")
     train(dataclasses.replace(cfg, max_updates=2), house_specs, tmp_path / "split")
@@ -214,6 +216,32 @@ def test_vec_env_workers_match_in_process(house_specs, table_path: str) -> None:
             envs.close()
     for (ia, la), (ib, lb) in zip(*runs):
         assert torch.equal(ia, ib) and torch.equal(la, lb)
+
+
+def test_dagger_with_trainable_cnn(tmp_path: Path, house_specs, table_path: str) -> None:
+    """With the CNN encoder the workers send frames and the policy's own CNN is trained."""
+    from ovon.models.policy import ActorCritic
+    from ovon.train import train
+
+    cfg = train_preset("tiny", algo="dagger", expert="shortest-path", max_updates=1, text_cache=table_path)
+    cfg = dataclasses.replace(cfg, encoder=dataclasses.replace(cfg.encoder, image="cnn", cnn_dim=16,
+                                                               cnn_channels=(8, 16), cnn_depth=True))
+    train(cfg, house_specs, tmp_path / "cnn")
+    policy = ActorCritic.load(tmp_path / "cnn" / "policy.pt")
+    assert policy.image_encoder is not None
+
+
+def test_cli_train_procedural(tmp_path: Path, table_path: str) -> None:
+    from ovon.cli.main import main
+
+    out = tmp_path / "run"
+    args = ["train", "--algo", "dagger", "--preset", "tiny", "--expert", "shortest-path", "--procedural", "0",
+            "--episodes", "3", "--set", f"text_cache={table_path}", "--out", str(out)]
+    assert main(args) == 0
+    assert (out / "policy.pt").is_file() and (out / "config.json").is_file()
+    assert main(args) == 2  # refuses to overwrite a run without --resume
+    assert main([*args[:-2], "--set", "max_updates=3", "--resume", "--out", str(out)]) == 0
+    assert [r["update"] for r in read_metrics(out)] == [1, 2, 3]
 
 
 # ----- schedule / config / CLI ------------------------------------------------------------------------

@@ -30,8 +30,8 @@ def cmd_demo(args) -> int:
     t0 = time.perf_counter()
     root = Path(args.root)
     scenes, data, runs = root / "scenes", root / "episodes", root / "runs"
-    for split, count, seed in (("train", args.train_scenes, 1000), ("val", args.val_scenes, 2000)):
-        rc = ovon(["scenes", "generate", "--split", split, "--count", str(count), "--seed", str(seed),
+    for split, count in (("train", args.train_scenes), ("val", args.val_scenes)):
+        rc = ovon(["scenes", "generate", "--split", split, "--count", str(count), "--seed", "0",
                    "--out", str(scenes), "--workers", str(args.workers)])
         if rc:
             return rc

@@ -33,7 +33,7 @@ def _ordered(splits):
 def plot_failures(name: str, records: list[dict], out: Path) -> Path:
     fb = failure_breakdown(records)
     splits = _ordered(fb)
-    fig, ax = plt.subplots(figsize=(1.8 + 1.6 * len(splits), 4.2))
+    fig, ax = plt.subplots(figsize=(3.6 + 1.6 * len(splits), 4.2))
     bottoms = [0.0] * len(splits)
     for label in FAILURE_LABELS:
         vals = [100 * fb[s][label] for s in splits]

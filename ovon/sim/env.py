@@ -135,16 +135,27 @@ class ObjectNavEnv(gym.Env):
         objs = goal_instances(world.scene, spec)
         rng = self.np_random
         if spec.start_position is not None:
-            grid = world.nav.grid_for(spec.start_position)
             start_pos = np.asarray(spec.start_position, dtype=np.float64)
+            grids = [world.nav.grid_for(start_pos)]
         else:
-            grid = world.nav.grid_for(objs[0].aabb_min)
+            # Random start: on the floor of a random viewpoint / goal object (a seeded choice).
             start_pos = None
+            anchors = [v.position for v in spec.viewpoints] or [o.aabb_min for o in objs]
+            order = rng.permutation(len(anchors))
+            grids = []
+            for i in order:
+                g = world.nav.grid_for(anchors[int(i)])
+                if all(g is not h for h in grids):
+                    grids.append(g)
+        grid, points = grids[0], np.zeros((0, 3))
         if spec.viewpoints:
             viewpoints = spec.viewpoints
             points = np.stack([v.position for v in viewpoints])
         else:
-            points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
+            for grid in grids:
+                points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
+                if len(points):
+                    break
             if len(points) == 0:
                 raise ValueError(f"no navigable point within 1 m of any {spec.goal_category!r} on its floor")
             viewpoints = [GoalViewpoint(p, 0.0) for p in points]

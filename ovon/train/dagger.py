@@ -17,6 +17,7 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 
+from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
 from ovon.train.checkpoint import set_rng_state
 from ovon.train.common import (
@@ -33,7 +34,6 @@ from ovon.train.common import (
 from ovon.train.config import TrainConfig, reward_for
 from ovon.train.logging import RunLogger
 from ovon.train.rollout import Batch
-from ovon.task.episode import EpisodeSpec
 
 
 def beta_at(cfg: TrainConfig, update: int) -> float:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import torch
 
+from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
 from ovon.train.checkpoint import set_rng_state
 from ovon.train.common import (
@@ -35,7 +36,6 @@ from ovon.train.common import (
 from ovon.train.config import FinetuneConfig, TrainConfig, reward_for
 from ovon.train.logging import RunLogger
 from ovon.train.rollout import Batch
-from ovon.task.episode import EpisodeSpec
 
 
 def finetune_lrs(ft: FinetuneConfig, update: int) -> tuple[float, float]:

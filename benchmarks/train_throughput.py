@@ -1,0 +1,132 @@
+"""Training throughput per algorithm: environment steps/s and time of one train step.
+
+Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,dagger,ppo] [--updates 4]
+       [--workers 2] [--houses 0,1] [--text hash|real] [--out benchmarks/results/train_throughput.json]
+
+Each online algorithm (DAgger with the configured expert, PPO) runs `--updates` updates of the preset on
+ad-hoc episodes in procedural houses, envs in `--workers` processes; the first update (world loading,
+numba compilation) is reported apart. Reported: env steps/s over whole updates (rollout + learning),
+rollout-only steps/s, and the learn (train-step) time. BC records `--bc-episodes` expert episodes, then
+reports the recording rate and the time of one BC update (batch `bc.batch_chunks` chunks of <= context
+steps). `--text hash` replaces the text encoder by fixed random vectors of the same size (384) so the
+benchmark does not time loading MiniLM; the per-step cost is the same.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import shutil
+import sys
+import tempfile
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ovon.train.common import adhoc_specs, needed_texts, parse_seed_list, write_text_table  # noqa: E402
+from ovon.train.config import train_preset  # noqa: E402
+from ovon.train.logging import read_metrics  # noqa: E402
+
+
+def _stats(rows: list[dict], key: str) -> float | None:
+    vals = [r[key] for r in rows if key in r]
+    return float(np.median(vals)) if vals else None
+
+
+def bench_online(algo: str, cfg, specs, root: Path) -> dict:
+    from ovon.train import train
+
+    out = root / algo
+    t0 = time.perf_counter()
+    train(dataclasses.replace(cfg, algo=algo), specs, out)
+    wall = time.perf_counter() - t0
+    rows = read_metrics(out)
+    steady = rows[1:] or rows
+    steps = cfg.num_envs * cfg.rollout_steps
+    rollout = _stats(steady, "time/rollout_s")
+    return {
+        "updates": len(rows),
+        "steps_per_update": steps,
+        "env_steps_per_s": _stats(steady, "steps_per_s"),
+        "rollout_steps_per_s": steps / rollout if rollout else None,
+        "rollout_s": rollout,
+        "learn_s": _stats(steady, "time/learn_s"),
+        "first_update_s": rows[0]["time"] if rows else None,
+        "wall_s": wall,
+    }
+
+
+def bench_bc(cfg, specs, root: Path, episodes: int) -> dict:
+    from ovon.train import train
+    from ovon.train.bc import record_shards
+    from ovon.train.common import text_table
+
+    shards = root / "bc_shards"
+    table = text_table(cfg.encoder, needed_texts(specs), cfg.text_cache, write=False)
+    t0 = time.perf_counter()
+    res = record_shards(cfg, specs, shards, table, episodes=episodes)
+    rec = time.perf_counter() - t0
+    steps = sum(r.get("steps", 0) for r in res)
+    bc = dataclasses.replace(cfg, algo="bc", bc=dataclasses.replace(cfg.bc, shards=str(shards)))
+    train(bc, None, root / "bc")
+    rows = read_metrics(root / "bc")
+    return {"record_episodes": episodes, "record_steps": steps, "record_steps_per_s": steps / rec,
+            "record_success": float(np.mean([r["success"] for r in res if "success" in r])),
+            "update_s": _stats(rows[1:] or rows, "time/update_s"), "batch_chunks": cfg.bc.batch_chunks,
+            "context": cfg.policy.context}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--preset", default="cpu-small")
+    ap.add_argument("--algos", default="bc,dagger,ppo")
+    ap.add_argument("--updates", type=int, default=4)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--envs", type=int, default=0, help="override num_envs (0 = preset)")
+    ap.add_argument("--houses", default="0,1")
+    ap.add_argument("--expert", default="frontier", choices=["frontier", "shortest-path"])
+    ap.add_argument("--text", default="hash", choices=["hash", "real"])
+    ap.add_argument("--bc-episodes", type=int, default=8)
+    ap.add_argument("--out", default="benchmarks/results/train_throughput.json")
+    args = ap.parse_args()
+
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    root = Path(tempfile.mkdtemp(prefix="ovon-train-bench-"))
+    specs = adhoc_specs(parse_seed_list(args.houses))
+    cfg = train_preset(args.preset, max_updates=args.updates, env_workers=args.workers, expert=args.expert,
+                       progress=False, checkpoint_every=10**9, text_cache=str(root / "text.pt"))
+    if args.envs:
+        cfg = dataclasses.replace(cfg, num_envs=args.envs)
+    if args.text == "hash":
+        texts = needed_texts(specs)
+        write_text_table(root / "text.pt", {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(384)
+                                            for t in texts}, cfg.encoder)
+    result = {"preset": args.preset, "num_envs": cfg.num_envs, "env_workers": cfg.env_workers,
+              "rollout_steps": cfg.rollout_steps, "camera": [cfg.sim.camera.width, cfg.sim.camera.height],
+              "policy": dataclasses.asdict(cfg.policy), "encoder": cfg.encoder.image, "expert": args.expert,
+              "houses": args.houses, "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
+              "algos": {}}
+    try:
+        for algo in [a for a in args.algos.split(",") if a]:
+            t = time.perf_counter()
+            if algo == "bc":
+                result["algos"][algo] = bench_bc(cfg, specs, root, args.bc_episodes)
+            else:
+                result["algos"][algo] = bench_online(algo, cfg, specs, root)
+            print(algo, json.dumps(result["algos"][algo]), f"({time.perf_counter() - t:.0f} s)", flush=True)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=1))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
