@@ -53,13 +53,14 @@ def main(argv: list[str] | None = None) -> int:
                 r = measure_throughput(kw, workers=workers, steps=args.steps, in_process=in_process)
                 row = {"backend": backend, "width": w, "height": h, "mode": mode, **r}
                 rows.append(row)
-                print(f"  {backend:6s} {w}x{h} {mode:10s} x{workers}: {r['steps_per_s']:7.1f} steps/s", flush=True)
+                print(f"  {backend:6s} {w}x{h} {mode:10s} x{workers}: {r['steps_per_s']:7.1f} steps/s, "
+                      f"{r['cpu_ms_per_step']:.2f} CPU ms/step", flush=True)
     load1 = os.getloadavg()
 
-    def sps(backend: str, w: int, h: int, mode: str, workers: int) -> float | None:
+    def sps(backend: str, w: int, h: int, mode: str, workers: int, key: str = "steps_per_s") -> float | None:
         for r in rows:
             if (r["backend"], r["width"], r["height"], r["mode"], r["workers"]) == (backend, w, h, mode, workers):
-                return r["steps_per_s"]
+                return r[key]
         return None
 
     ratios = []
@@ -75,13 +76,16 @@ def main(argv: list[str] | None = None) -> int:
                                "ratio": gl / em if gl and em else None})
 
     print()
+    print("steps/s measured (in parentheses: CPU-bound rate = workers x 1000 / CPU ms per step)")
     print("| backend | resolution | 1 in-process | 1 worker | 2 workers | 2 vs 1 workers |")
     print("|---|---|---|---|---|---|")
+    cb = "cpu_bound_steps_per_s"
     for backend in backends:
         for w, h in RESOLUTIONS:
-            a, b, c = (sps(backend, w, h, "in-process", 1), sps(backend, w, h, "workers", 1),
-                       sps(backend, w, h, "workers", 2))
-            print(f"| {backend} | {w}x{h} | {a:.0f} | {b:.0f} | {c:.0f} | {c / b:.2f} |")
+            cells = [(sps(backend, w, h, m, n), sps(backend, w, h, m, n, cb))
+                     for m, n in (("in-process", 1), ("workers", 1), ("workers", 2))]
+            txt = " | ".join(f"{a:.0f} ({c:.0f})" for a, c in cells)
+            print(f"| {backend} | {w}x{h} | {txt} | {cells[2][0] / cells[1][0]:.2f} |")
     print()
     for r in ratios:
         if r["kind"] == "gl vs embree":

@@ -144,7 +144,7 @@ def test_cli_evaluate_report_and_video(tiny_dataset, tiny_scenes, tmp_path, caps
         assert (tmp_path / "rep" / name).stat().st_size > 0
     ep = read_records(run)[0]
     assert ovon(["video", "--run", str(run), "--episode", ep["episode_id"], "--split", ep["split"],
-                 "--out", str(tmp_path / "ep.mp4")]) == 0
+                 "--scene", Path(ep["scene"]).parent.name, "--out", str(tmp_path / "ep.mp4")]) == 0
     import imageio.v2 as imageio
 
     n_frames = sum(1 for _ in imageio.get_reader(tmp_path / "ep.mp4"))

@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from meshes import empty_floor, room_boxes, scene_from_boxes, wall_x_with_gap
 
 from ovon.config.sim import AgentConfig
 from ovon.sim.geodesic import distance_field, geodesic_distance
 from ovon.sim.navgrid import build_navigation
+from tests.meshes import empty_floor, room_boxes, scene_from_boxes, wall_x_with_gap
 
 R = AgentConfig().radius
 

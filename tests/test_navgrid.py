@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from meshes import empty_floor, room_boxes, scene_from_boxes, wall_x_with_gap
 
 from ovon.config.sim import AgentConfig, NavConfig
 from ovon.sim.navgrid import build_navigation, clear_cache
+from tests.meshes import empty_floor, room_boxes, scene_from_boxes, wall_x_with_gap
 
 R = AgentConfig().radius
 CS = NavConfig().cell_size

@@ -48,6 +48,7 @@ def register(sub) -> None:
     v.add_argument("--episode", required=True)
     v.add_argument("--split")
     v.add_argument("--seed", type=int)
+    v.add_argument("--scene", help="part of the scene path (episode ids are unique per scene only)")
     v.add_argument("--fps", type=int, default=8)
     v.add_argument("--out", required=True)
     v.set_defaults(func=cmd_video)
@@ -104,6 +105,7 @@ def cmd_report(args) -> int:
 def cmd_video(args) -> int:
     from ovon.reports.video import render_video
 
-    path = render_video(args.run, args.episode, args.out, split=args.split, seed=args.seed, fps=args.fps)
+    path = render_video(args.run, args.episode, args.out, split=args.split, seed=args.seed, fps=args.fps,
+                        scene=args.scene)
     print(f"video: {path}")
     return 0

@@ -18,6 +18,7 @@ import numba as nb
 import numpy as np
 
 from ovon.experts.visibility import los_clear
+from ovon.sim.collision import forward_delta, free_prefix
 
 STOP, MOVE_FORWARD, TURN_LEFT, TURN_RIGHT = 0, 1, 2, 3
 
@@ -259,24 +260,13 @@ def trace_parents(parent: np.ndarray, r: int, c: int, cols: int) -> tuple[np.nda
     return pr, pc
 
 
-@nb.njit(cache=True, nogil=True)
 def forward_free(
     navigable: np.ndarray, ox: float, oz: float, cs: float, x: float, z: float, yaw: float, step: float
 ) -> bool:
-    """Whether MOVE_FORWARD from (x, z) stays on navigable cells (half-cell samples, as the simulator)."""
-    rows, cols = navigable.shape
-    fx = -math.sin(yaw) * step
-    fz = -math.cos(yaw) * step
-    h = max(cs * 0.5, 1e-3)
-    n = max(1, int(math.ceil(step / h)))
-    for i in range(1, n + 1):
-        px = x + fx * (i / n)
-        pz = z + fz * (i / n)
-        c = int(math.floor((px - ox) / cs))
-        r = int(math.floor((pz - oz) / cs))
-        if r < 0 or r >= rows or c < 0 or c >= cols or not navigable[r, c]:
-            return False
-    return True
+    """Whether MOVE_FORWARD from (x, z) stays on navigable cells: the simulator's own test."""
+    dx, dz = forward_delta(yaw, step)
+    k, n = free_prefix(navigable, ox, oz, cs, x, z, dx, dz)
+    return k == n
 
 
 def _wrap(a: float) -> float:

@@ -62,7 +62,7 @@ def _fit(img: np.ndarray, h: int) -> np.ndarray:
 
 
 def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: str | None = None,
-                 seed: int | None = None, fps: int = 8) -> Path:
+                 seed: int | None = None, fps: int = 8, scene: str | None = None) -> Path:
     from ovon.evaluate.harness import load_specs
     from ovon.sim.env import ObjectNavEnv
 
@@ -72,10 +72,16 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
         raise FileNotFoundError(f"{run_dir} has no run.json: is it a folder written by `ovon evaluate`?")
     meta = json.loads(meta_path.read_text())
     recs = [r for r in read_records(run_dir) if str(r["episode_id"]) == str(episode_id)
-            and (split is None or r["split"] == split) and (seed is None or int(r["seed"]) == seed)]
+            and (split is None or r["split"] == split) and (seed is None or int(r["seed"]) == seed)
+            and (scene is None or scene in r["scene"])]
     if not recs:
         raise KeyError(
             f"episode {episode_id!r} is not in {run_dir}/episodes.jsonl (filters split={split}, seed={seed})"
+        )
+    where = sorted({(r["split"], r["scene"]) for r in recs})
+    if len(where) > 1:  # episode ids are unique per scene shard only
+        raise ValueError(
+            f"episode {episode_id!r} exists in several (split, scene) pairs: {where}; pass --split and/or --scene"
         )
     rec = recs[0]
     specs = [s for s in load_specs(meta["data"], meta["scenes"], rec["split"], None)

@@ -2,10 +2,10 @@
 optional sliding, actuation noise, and odometry relative to the start pose.
 
 Collision model: forward motion is checked against the navigable (radius-eroded) grid by sampling the
-segment at half-cell steps. Without sliding the agent stops at the last navigable sample before the
-obstacle (Habitat's `tryStepNoSliding` stops at the contact too); with sliding the remaining motion is
-projected onto the x or z axis, whichever progresses further (a grid approximation of sliding along
-the navmesh edge). Either way the step reports `collided=True`.
+segment at half-cell steps (`ovon.sim.collision.free_prefix`, shared with the experts). Without sliding
+the agent stops at the last navigable sample before the obstacle (Habitat's `tryStepNoSliding` stops at
+the contact too); with sliding the remaining motion is projected onto the x or z axis, whichever
+progresses further (a grid approximation of sliding along the navmesh edge). Either way the step reports `collided=True`.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import numpy as np
 
 from ovon.config.sim import AgentConfig
 from ovon.geometry import heading_vector, wrap_angle
+from ovon.sim.collision import forward_delta, free_prefix
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState
 
@@ -37,6 +38,7 @@ class Kinematics:
         self.grid = grid
         self.cfg = cfg
         self.actuation = actuation
+        self._navigable = np.ascontiguousarray(grid.navigable, dtype=np.bool_)
 
     def step(self, state: AgentState, action: int, rng: np.random.Generator | None = None) -> StepResult:
         s = state.copy()
@@ -55,17 +57,18 @@ class Kinematics:
             if self.actuation is not None and rng is not None:
                 fwd, lat, dyaw = self.actuation.sample(rng, is_turn=True, turn_sign=sign)
                 s.yaw = wrap_angle(s.yaw + dyaw)
-                target = s.position + self._local_to_world(s.yaw, fwd, lat)
-                s.position, collided = self._move_to(s.position, target)
+                d = self._local_to_world(s.yaw, fwd, lat)
+                s.position, collided = self._move(s.position, float(d[0]), float(d[2]))
                 return StepResult(s, collided)
             return StepResult(s, False)
         if action == MOVE_FORWARD:
-            fwd, lat, dyaw = cfg.forward_step, 0.0, 0.0
+            dx, dz = forward_delta(s.yaw, cfg.forward_step)  # the experts predict collisions with this too
+            dyaw = 0.0
             if self.actuation is not None and rng is not None:
                 nf, nl, dyaw = self.actuation.sample(rng, is_turn=False)
-                fwd, lat = fwd + nf, lat + nl
-            target = s.position + self._local_to_world(s.yaw, fwd, lat)
-            s.position, collided = self._move_to(s.position, target)
+                noise = self._local_to_world(s.yaw, nf, nl)
+                dx, dz = dx + float(noise[0]), dz + float(noise[2])
+            s.position, collided = self._move(s.position, dx, dz)
             s.yaw = wrap_angle(s.yaw + dyaw)
             return StepResult(s, collided)
         raise ValueError(f"unknown action {action!r}; valid actions are 0..5 ({', '.join(ACTION_NAMES)})")
@@ -76,33 +79,25 @@ class Kinematics:
         right = np.array([-f[2], 0.0, f[0]])  # forward rotated -90 deg about +y
         return f * forward + right * lateral
 
-    def _free_prefix(self, start: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Last navigable point along start->target and whether the full segment was free."""
-        delta = target - start
-        dist = float(math.hypot(delta[0], delta[2]))
-        step = max(self.grid.cell_size * 0.5, 1e-3)
-        n = max(1, int(math.ceil(dist / step)))
-        last = start
-        for i in range(1, n + 1):
-            p = start + delta * (i / n)
-            if not self.grid.is_navigable(p):
-                return last, False
-            last = p
-        return last, True
+    def _free_prefix(self, start: np.ndarray, dx: float, dz: float) -> tuple[np.ndarray, bool]:
+        """Last navigable sample along the move and whether the whole move was free."""
+        g = self.grid
+        k, n = free_prefix(self._navigable, float(g.origin[0]), float(g.origin[1]), float(g.cell_size),
+                           float(start[0]), float(start[2]), dx, dz)
+        f = k / n
+        return np.array([start[0] + dx * f, start[1], start[2] + dz * f], dtype=np.float64), k == n
 
-    def _move_to(self, start: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, bool]:
-        reached, free = self._free_prefix(start, target)
+    def _move(self, start: np.ndarray, dx: float, dz: float) -> tuple[np.ndarray, bool]:
+        reached, free = self._free_prefix(start, dx, dz)
         if not free and self.cfg.allow_sliding:
-            rest = target - reached
+            rest = (start[0] + dx - reached[0], start[2] + dz - reached[2])
             best = reached
-            for axis in (0, 2):
-                slide = np.zeros(3)
-                slide[axis] = rest[axis]
-                cand, _ = self._free_prefix(reached, reached + slide)
+            for slide in ((rest[0], 0.0), (0.0, rest[1])):
+                cand, _ = self._free_prefix(reached, slide[0], slide[1])
                 if np.linalg.norm(cand - reached) > np.linalg.norm(best - reached):
                     best = cand
             reached = best
-        out = np.array(reached, dtype=np.float64)
+        out = reached
         r, c = self.grid.world_to_cell(out)
         h = float(self.grid.heights[r, c])
         if math.isfinite(h):

@@ -17,6 +17,7 @@ pipe. `shared_memory=False` pickles whole observations through the pipe instead 
 from __future__ import annotations
 
 import functools
+import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -177,6 +178,20 @@ def pick_goal(scene: str) -> str:
     return max(sorted(counts), key=lambda c: counts[c])
 
 
+def _cpu_seconds(pids: Sequence[int]) -> float:
+    """User + system CPU seconds consumed so far by these processes (Linux /proc; 0 elsewhere)."""
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    total = 0.0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / tick
+        except (OSError, IndexError, ValueError):
+            return 0.0
+    return total
+
+
 def measure_throughput(
     env_kwargs: Mapping[str, Any],
     workers: int = 1,
@@ -188,7 +203,10 @@ def measure_throughput(
     """Environment steps per second with random actions 1-3 and auto-reset (resets are counted inside
     the timed loop). `workers` envs run in that many processes (`make_vector_env`, SameStep autoreset);
     `in_process` (default: when workers == 1) runs one env in this process instead. `steps` counts env
-    steps over all workers. Returns steps_per_s, seconds, steps, workers, setup_s."""
+    steps over all workers. Returns steps_per_s, seconds, steps, workers, setup_s and cpu_ms_per_step
+    (CPU time of this process + the workers per env step, mostly independent of other load) and
+    cpu_bound_steps_per_s = min(workers, cpu_count) * 1000 / cpu_ms_per_step, the rate if every worker
+    had an idle core (what a contended shared machine hides)."""
     import time
 
     rng = np.random.default_rng(seed)
@@ -206,28 +224,42 @@ def measure_throughput(
             for i in range(warmup + steps):
                 if i == warmup:
                     setup = time.perf_counter() - t0
-                    t1 = time.perf_counter()
+                    t1, c1 = time.perf_counter(), time.process_time()
                 _, _, term, trunc, _ = env.step(int(rng.integers(1, 4)))
                 if term or trunc:
                     env.reset()
-            dt = time.perf_counter() - t1
+            dt, cpu = time.perf_counter() - t1, time.process_time() - c1
         finally:
             env.close()
-        return {"steps_per_s": steps / dt, "seconds": dt, "steps": steps, "workers": 1, "setup_s": setup}
+        return _result(steps, dt, cpu, 1, setup)
     vec = make_vector_env(workers, dict(env_kwargs), autoreset_mode=AutoresetMode.SAME_STEP)
     try:
         vec.reset(seed=seed)
         calls = max(1, steps // workers)
+        pids = [p.pid for p in vec.unwrapped.processes]
         for i in range(warmup + calls):
             if i == warmup:
                 setup = time.perf_counter() - t0
-                t1 = time.perf_counter()
+                t1, c1, w1 = time.perf_counter(), time.process_time(), _cpu_seconds(pids)
             vec.step(rng.integers(1, 4, size=workers))
         dt = time.perf_counter() - t1
+        cpu = time.process_time() - c1 + _cpu_seconds(pids) - w1
     finally:
         vec.close()
-    n = calls * workers
-    return {"steps_per_s": n / dt, "seconds": dt, "steps": n, "workers": workers, "setup_s": setup}
+    return _result(calls * workers, dt, cpu, workers, setup)
+
+
+def _result(steps: int, seconds: float, cpu: float, workers: int, setup: float) -> dict[str, float]:
+    cpu_ms = 1000.0 * cpu / steps
+    return {
+        "steps_per_s": steps / seconds,
+        "seconds": seconds,
+        "steps": steps,
+        "workers": workers,
+        "setup_s": setup,
+        "cpu_ms_per_step": cpu_ms,
+        "cpu_bound_steps_per_s": min(workers, os.cpu_count() or 1) * 1000.0 / cpu_ms if cpu_ms > 0 else math.nan,
+    }
 
 
 def profile_step(env_kwargs: Mapping[str, Any], steps: int = 200, seed: int = 0) -> dict[str, float]:
