@@ -5,7 +5,8 @@ Collision model: forward motion is checked against the navigable (radius-eroded)
 segment at half-cell steps (`ovon.sim.collision.free_prefix`, shared with the experts). Without sliding
 the agent stops at the last navigable sample before the obstacle (Habitat's `tryStepNoSliding` stops at
 the contact too); with sliding the remaining motion is projected onto the x or z axis, whichever
-progresses further (a grid approximation of sliding along the navmesh edge). Either way the step reports `collided=True`.
+progresses further (a grid approximation of sliding along the navmesh edge).
+Either way the step reports `collided=True`.
 """
 
 from __future__ import annotations
