@@ -92,7 +92,7 @@ class TrainConfig:
     num_envs: int = 32
     env_workers: int = -1  # processes for the envs: -1 = one per env, 0 = in this process
     rollout_steps: int = 100
-    scene_repeat: int = 4  # episodes sampled from a scene before an env may switch scene (world reloads)
+    scene_repeat: int = 16  # episodes sampled from a scene before an env may switch scene (world reloads)
     # Budget: environment steps over all ranks; `max_updates` > 0 caps the number of updates instead.
     total_steps: int = 150_000_000
     max_updates: int = 0
