@@ -88,13 +88,17 @@ def test_bc_resume_reproduces_losses(tmp_path: Path) -> None:
         assert torch.equal(x, y)
 
 
-@pytest.mark.parametrize("algo", ["dagger", "ppo"])
+@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "ppo"])
 def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
-    """Envs replay their current episode, the acting memory and every RNG are restored."""
+    """Envs replay their current episode, the acting memory, the DAgger buffer and every RNG are restored."""
     from ovon.train import train
+    from ovon.train.config import DaggerConfig
 
+    extra = {}
+    if algo == "dagger-aggregated":
+        algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2)}
     cfg = train_preset("tiny", algo=algo, expert="shortest-path", num_envs=1, rollout_steps=6,
-                       max_updates=4, text_cache=table_path)
+                       max_updates=4, text_cache=table_path, **extra)
     train(cfg, house_specs, tmp_path / "straight")
     train(dataclasses.replace(cfg, max_updates=2), house_specs, tmp_path / "split")
     train(cfg, house_specs, tmp_path / "split", resume=True)

@@ -66,6 +66,13 @@ class DaggerConfig:
     beta_start: float = 0.0
     beta_end: float = 0.0
     beta_updates: int = 0
+    # Dataset aggregation: keep the last `buffer_rollouts` labelled rollouts (1 = on-policy only, as
+    # upstream) and take `grad_steps` optimiser steps per update, each on `sample_rollouts` of them (the
+    # newest always included). On a CPU the rollout costs ~40x a gradient step, so reusing labels is
+    # what makes DAgger learn in minutes.
+    buffer_rollouts: int = 1
+    grad_steps: int = 1
+    sample_rollouts: int = 1
 
 
 @dataclass(frozen=True)
@@ -133,6 +140,7 @@ def _cpu_small() -> TrainConfig:
         max_grad_norm=0.5,
         finetune=FinetuneConfig(critic_lr=5e-4, actor_lr=1e-4, scale=0.1),
         bc=BCConfig(record_episodes=200, record_workers=2, batch_chunks=16, epochs=20),
+        dagger=DaggerConfig(buffer_rollouts=32, grad_steps=8, sample_rollouts=2),
         checkpoint_every=20,
     )
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -56,10 +57,12 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
     act_state = policy.init_state(n_envs, dev)
     prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
     start_update, step = 0, 0
+    buffer: list[tuple] = []  # aggregated labelled rollouts (cfg.dagger.buffer_rollouts most recent)
     if resume and (out / "checkpoint.pt").exists():
         ckpt, mine = load_online(out, info, policy, optimizer)
         start_update, step = ckpt["update"], ckpt["step"]
         act_state, prev_action = mine["act_state"], mine["prev_action"].to(dev)
+        buffer = list(mine.get("buffer", []))
         batch = envs.set_state(mine["env"])
         set_rng_state(mine["rng"])
     total = num_updates(cfg, info.world_size)
@@ -91,21 +94,31 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 finished += batch.metrics
             t1 = time.perf_counter()
             # ---- learn: cross-entropy on the expert's labels over (num_envs, T) chunks -----------------
+            buffer.append((stack_images(images, 1), torch.stack(goals, 1), torch.stack(prevs, 1),
+                           torch.stack(starts, 1), torch.stack(labels, 1)))
+            del buffer[: max(0, len(buffer) - cfg.dagger.buffer_rollouts)]
             policy.train()
-            img = map_images(stack_images(images, 1), lambda x: x.to(dev))  # (N, T, ...)
-            obs = policy.make_obs(features(policy, img), torch.stack(goals, 1).to(dev))
-            logits, values = model(obs, torch.stack(prevs, 1).to(dev), torch.stack(starts, 1).to(dev))
-            target = torch.stack(labels, 1).to(dev)
-            valid = target >= 0
-            loss = F.cross_entropy(logits[valid], target[valid]) + 0.0 * values.sum()  # critic: DDP sees it
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)
-            optimizer.step()
+            losses, accs = [], []
+            for _ in range(cfg.dagger.grad_steps):
+                picks = [len(buffer) - 1]  # the newest rollout, plus random older ones
+                older = torch.randperm(len(buffer) - 1)[: cfg.dagger.sample_rollouts - 1].tolist()
+                parts = [buffer[i] for i in picks + older]
+                img = map_images(_cat([p[0] for p in parts]), lambda x: x.to(dev))  # (N, T, ...)
+                obs = policy.make_obs(features(policy, img), torch.cat([p[1] for p in parts]).to(dev))
+                logits, values = model(obs, torch.cat([p[2] for p in parts]).to(dev),
+                                       torch.cat([p[3] for p in parts]).to(dev))
+                target = torch.cat([p[4] for p in parts]).to(dev)
+                valid = target >= 0
+                loss = F.cross_entropy(logits[valid], target[valid]) + 0.0 * values.sum()  # critic: DDP sees it
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)
+                optimizer.step()
+                losses.append(loss.item())
+                accs.append((logits[valid].argmax(-1) == target[valid]).float().mean().item())
             t2 = time.perf_counter()
             step += n_envs * T * info.world_size
-            acc = (logits[valid].argmax(-1) == target[valid]).float().mean()
-            scalars = dist.all_reduce_mean({"loss": loss.item(), "accuracy": acc.item(),
+            scalars = dist.all_reduce_mean({"loss": float(np.mean(losses)), "accuracy": float(np.mean(accs)),
                                             "grad_norm": float(grad_norm), "time/rollout_s": t1 - t0,
                                             "time/learn_s": t2 - t1}, info)
             eps = [m for part in dist.gather_objects(finished, info) for m in part]
@@ -115,9 +128,17 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 logger.log(update + 1, step, last)
             if (update + 1) % cfg.checkpoint_every == 0 or update + 1 == total:
                 save_online(out, info, cfg, "dagger", policy, optimizer, update + 1, step,
-                            {"env": envs.get_state(), "act_state": act_state, "prev_action": prev_action.cpu()})
+                            {"env": envs.get_state(), "act_state": act_state, "prev_action": prev_action.cpu(),
+                             "buffer": buffer})
         write_rank_report(out, info, policy, total)
     finally:
         logger.close()
         envs.close()
     return last
+
+
+def _cat(items: list) -> object:
+    """Concatenate rollouts along the env dimension (tensors or dicts of tensors for raw frames)."""
+    if isinstance(items[0], torch.Tensor):
+        return torch.cat(items)
+    return {k: torch.cat([x[k] for x in items]) for k in items[0]}
