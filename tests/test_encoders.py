@@ -243,3 +243,21 @@ def test_unknown_encoder_names() -> None:
         make_image_encoder(EncoderConfig(image="nope"), _fake_text())  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="valid"):
         make_text_encoder(EncoderConfig(text="nope"))  # type: ignore[arg-type]
+
+
+def test_oracle_depth_grid_is_appended_and_scaled():
+    """Coarse depth (mean and min per cell / max_depth) after the text-space parts."""
+    from ovon.models.encoders import image_encoder_dim
+    from ovon.models.encoders.oracle_vl import OracleVLEncoder
+
+    text = FunctionTextEncoder(lambda names: torch.ones(len(names), 4) / 2.0, 4)
+    enc = OracleVLEncoder(text, grid=1, include_global=False, depth_grid=(2, 2), max_depth=5.0)
+    enc.set_scene({1: "couch"})
+    depth = np.full((4, 6), 5.0, dtype=np.float32)
+    depth[:2, :3] = 1.0  # top-left cell near
+    depth[3, 5] = 0.5  # one close pixel bottom-right
+    out = enc.encode({"semantic": np.ones((1, 4, 6), np.int32), "depth": depth[None]})[0].numpy()
+    assert out.shape == (4 + 8,) and enc.dim == 12
+    np.testing.assert_allclose(out[4:8], [0.2, 1.0, 1.0, (5 * 5 + 0.5) / 6 / 5], rtol=1e-6)  # means
+    np.testing.assert_allclose(out[8:], [0.2, 1.0, 1.0, 0.1], rtol=1e-6)  # minima
+    assert image_encoder_dim(EncoderConfig(oracle_grid=1, oracle_global=False, oracle_depth_grid=(2, 2)), 4) == 12

@@ -65,7 +65,7 @@ class PolicyAgent:
             if not self._scene_set:
                 self.image_encoder.set_scene({o.id: o.category for o in p.world.scene.objects if o.category})
                 self._scene_set = True
-            batch = {"semantic": p.frame.semantic[None]}
+            batch = {"semantic": p.frame.semantic[None], "depth": observation["depth"][None]}
         else:
             batch = {"rgb": observation["rgb"][None], "depth": observation["depth"][None]}
         return self.image_encoder.encode(batch).to(self.device)

@@ -33,6 +33,7 @@ class EncoderConfig:
     # Oracle vision-language encoder (oracle perception).
     oracle_grid: int = 2  # grid x grid spatial cells
     oracle_global: bool = True  # prepend the whole-frame pooled vector
+    oracle_depth_grid: tuple[int, int] = (0, 0)  # append coarse depth (rows, cols); (0, 0) = none
     oracle_noise_std: float = 0.0  # per-instance noise norm relative to the unit text embedding
     oracle_dropout: float = 0.0  # probability that a visible instance is missed in a frame
     oracle_seed: int = 0

@@ -129,7 +129,8 @@ def _paper() -> TrainConfig:
 def _cpu_small() -> TrainConfig:
     return TrainConfig(
         policy=PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=16),
-        encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=2, oracle_global=True),
+        encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=2, oracle_global=True,
+                              oracle_depth_grid=(4, 6)),
         sim=SimConfig(camera=CameraConfig(width=96, height=72)),
         task=TaskConfig(max_steps=300),
         num_envs=4,
@@ -140,7 +141,10 @@ def _cpu_small() -> TrainConfig:
         max_grad_norm=0.5,
         finetune=FinetuneConfig(critic_lr=5e-4, actor_lr=1e-4, scale=0.1),
         bc=BCConfig(record_episodes=200, record_workers=2, batch_chunks=16, epochs=20),
-        dagger=DaggerConfig(buffer_rollouts=32, grad_steps=8, sample_rollouts=2),
+        # beta 1 -> 0: a randomly initialised student that drives alone just spins (turn labels only) and
+        # never visits the states where the expert says "forward" or STOP.
+        dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=300, buffer_rollouts=32, grad_steps=8,
+                            sample_rollouts=2),
         checkpoint_every=20,
     )
 

@@ -44,6 +44,8 @@ class OracleVLEncoder:
         noise_std: float = 0.0,
         dropout: float = 0.0,
         seed: int = 0,
+        depth_grid: tuple[int, int] = (0, 0),
+        max_depth: float = 5.0,
     ) -> None:
         if grid < 1:
             raise ValueError(f"oracle grid must be >= 1, got {grid}")
@@ -58,7 +60,12 @@ class OracleVLEncoder:
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.parts = grid * grid + (1 if include_global else 0)
-        self.dim = self.parts * self.text_dim
+        # Coarse depth (a real sensor, not privileged): per cell of a rows x cols grid, the mean and the
+        # minimum depth / max_depth. Without it the policy sees objects but no walls or free space.
+        self.depth_grid = (int(depth_grid[0]), int(depth_grid[1]))
+        self.max_depth = float(max_depth)
+        self.depth_dim = 2 * self.depth_grid[0] * self.depth_grid[1]
+        self.dim = self.parts * self.text_dim + self.depth_dim
         self._shared: tuple[np.ndarray, np.ndarray] | None = None
         self._per_env: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._cells: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
@@ -144,6 +151,14 @@ class OracleVLEncoder:
             parts.insert(0, glob[None])
         return np.concatenate(parts, 0).astype(np.float32).ravel()
 
+    def encode_depth(self, depth: np.ndarray) -> np.ndarray:
+        """(H, W) metres -> (2 * rows * cols,) mean and min per cell, scaled to [0, 1]."""
+        gr, gc = self.depth_grid
+        h, w = depth.shape
+        d = np.clip(np.asarray(depth, dtype=np.float32) / self.max_depth, 0.0, 1.0)
+        d = d[: h - h % gr, : w - w % gc].reshape(gr, h // gr, gc, w // gc)
+        return np.concatenate([d.mean(axis=(1, 3)).ravel(), d.min(axis=(1, 3)).ravel()]).astype(np.float32)
+
     def encode(self, batch: ObsBatch) -> torch.Tensor:
         sem = get_obs(batch, "semantic")
         if isinstance(sem, torch.Tensor):
@@ -151,10 +166,20 @@ class OracleVLEncoder:
         sem = np.asarray(sem)
         if sem.ndim == 2:
             sem = sem[None]
-        return torch.from_numpy(np.stack([self.encode_frame(s, i) for i, s in enumerate(sem)]))
+        out = np.stack([self.encode_frame(s, i) for i, s in enumerate(sem)])
+        if self.depth_dim:
+            depth = get_obs(batch, "depth")
+            if isinstance(depth, torch.Tensor):
+                depth = depth.cpu().numpy()
+            depth = np.asarray(depth)
+            if depth.ndim == 2:
+                depth = depth[None]
+            out = np.concatenate([out, np.stack([self.encode_depth(d) for d in depth])], axis=1)
+        return torch.from_numpy(out)
 
     def text_aligned(self, image_emb: torch.Tensor) -> torch.Tensor:
         """The part of the embedding that lives in the goal-text space: (B, dim) -> (B, text_dim)."""
+        image_emb = image_emb[..., : self.parts * self.text_dim]
         parts = image_emb.reshape(*image_emb.shape[:-1], self.parts, self.text_dim)
         return parts[..., 0, :] if self.include_global else parts.mean(-2)
 
