@@ -261,3 +261,13 @@ def test_oracle_depth_grid_is_appended_and_scaled():
     np.testing.assert_allclose(out[4:8], [0.2, 1.0, 1.0, (5 * 5 + 0.5) / 6 / 5], rtol=1e-6)  # means
     np.testing.assert_allclose(out[8:], [0.2, 1.0, 1.0, 0.1], rtol=1e-6)  # minima
     assert image_encoder_dim(EncoderConfig(oracle_grid=1, oracle_global=False, oracle_depth_grid=(2, 2)), 4) == 12
+
+
+def test_oracle_depth_grid_with_nothing_visible_keeps_the_size():
+    from ovon.models.encoders.oracle_vl import OracleVLEncoder
+
+    enc = OracleVLEncoder(FunctionTextEncoder(lambda n: np.ones((len(n), 4), np.float32), 4), grid=1,
+                          include_global=False, depth_grid=(2, 2))
+    enc.set_scene({1: "couch"})
+    out = enc.encode({"semantic": np.zeros((2, 4, 6), np.int32), "depth": np.ones((2, 4, 6), np.float32)})
+    assert out.shape == (2, enc.dim)

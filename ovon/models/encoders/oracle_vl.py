@@ -130,7 +130,7 @@ class OracleVLEncoder:
         cats_per_pixel = lut[sem]
         known = cats_per_pixel >= 0
         if not known.any():
-            return np.zeros(self.dim, dtype=np.float32)
+            return np.zeros(self.parts * self.text_dim, dtype=np.float32)
         ids, inv = np.unique(sem[known], return_inverse=True)
         n = ids.size
         counts = np.bincount(cell[known] * n + inv, minlength=self.grid * self.grid * n)
