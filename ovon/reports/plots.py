@@ -45,8 +45,7 @@ def plot_failures(name: str, records: list[dict], out: Path) -> Path:
     ax.set_ylabel("% of episodes (failures)")
     ax.set_title(f"Failure modes: {name}")
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
+    fig.savefig(out, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return out
 
@@ -64,8 +63,7 @@ def plot_sr_vs_distance(runs: list[tuple[str, list[dict]]], out: Path) -> Path:
     ax.set_ylim(-2, 102)
     ax.tick_params(axis="x", labelrotation=30)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out, dpi=120)
+    fig.savefig(out, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return out
 
@@ -80,7 +78,6 @@ def plot_sr_per_category(name: str, records: list[dict], out: Path, top: int = 4
         ax.set_title(f"{name} / {split}: SR per category (most frequent {len(items)})", fontsize=9)
         ax.set_ylim(0, 100)
         ax.tick_params(axis="x", labelrotation=70, labelsize=7)
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    fig.savefig(out, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return out
