@@ -216,3 +216,28 @@ def test_cnn_policy_owns_encoder(tmp_path) -> None:
     assert p.image_encoder.convs[0].weight.grad is not None
     p.save(tmp_path / "c.pt")
     assert ActorCritic.load(tmp_path / "c.pt").image_encoder is not None
+
+
+def test_goal_similarity_features() -> None:
+    """Per text-aligned part: dot, cosine and norm against the unit goal; the part layout follows the
+    encoder config, and an encoder without text-space parts is refused by name."""
+    enc = EncoderConfig(image="oracle-vl", oracle_grid=1, oracle_global=True)  # 2 parts of TXT dims
+    torch.manual_seed(0)
+    p = build_policy(policy_preset("tiny", goal_similarity=True), 2 * TXT + 4, TXT, enc).eval()
+    assert p.sim_parts == 2 and p.input_proj.in_features == 3 * TXT + 4 + p.cfg.prev_action_dim + 6
+    goal = torch.zeros(TXT)
+    goal[0] = 2.0  # not unit length: the feature normalises it
+    part_a = torch.zeros(TXT)
+    part_a[0], part_a[1] = 0.3, 0.4  # dot 0.3, norm 0.5, cosine 0.6
+    part_b = torch.zeros(TXT)
+    part_b[1] = 1.0  # orthogonal to the goal
+    obs = torch.cat([part_a, part_b, torch.ones(4), goal])[None]
+    feats = p.goal_similarity(obs)[0]
+    assert torch.allclose(feats, torch.tensor([0.3, 0.0, 0.6, 0.0, 0.5, 1.0]), atol=1e-6)
+    logits, _ = p(obs[:, None].expand(1, 3, -1), torch.tensor([[-1, 1, 2]]))
+    assert logits.shape == (1, 3, 6)
+    st = p.init_state(1)  # acting goes through the same input path
+    lg, _, _ = p.act_step(obs, torch.tensor([-1]), st, torch.ones(1, dtype=torch.bool))
+    assert torch.allclose(lg, logits[:, 0], atol=1e-5)
+    with pytest.raises(ValueError, match="goal_similarity"):
+        build_policy(policy_preset("tiny", goal_similarity=True), 32, TXT, EncoderConfig(image="cnn", cnn_dim=32))

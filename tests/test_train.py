@@ -291,3 +291,31 @@ def test_cli_config_overrides() -> None:
 
     with pytest.raises(ConfigError):
         build_config(parser.parse_args(["train", "--algo", "bc", "--set", "nope=1", "--out", "x"]))
+
+
+def test_imitation_loss_weights_stop_and_ignores_unlabelled() -> None:
+    from ovon.train.common import imitation_loss
+
+    logits = torch.randn(2, 5, 6, generator=torch.Generator().manual_seed(0))
+    target = torch.tensor([[0, 1, 2, -1, 3], [1, 1, 0, 2, -1]])
+    valid = target >= 0
+    plain = torch.nn.functional.cross_entropy(logits[valid], target[valid])
+    assert torch.allclose(imitation_loss(logits, target), plain)
+    per = torch.nn.functional.cross_entropy(logits[valid], target[valid], reduction="none")
+    w = torch.where(target[valid] == 0, 4.0, 1.0)
+    assert torch.allclose(imitation_loss(logits, target, stop_weight=4.0), (per * w).sum() / w.sum())
+
+
+def test_evaluate_uses_the_camera_a_policy_was_trained_with(tmp_path) -> None:
+    from ovon.cli.evaluate import trained_camera
+    from ovon.models.config import EncoderConfig, policy_preset
+    from ovon.models.policy import build_policy
+
+    policy = build_policy(policy_preset("tiny"), 8, 4, EncoderConfig())
+    policy.save(tmp_path / "policy.pt", extra={"camera": {"width": 96, "height": 72, "hfov_deg": 42.0,
+                                                           "backend": "gl", "not_a_field": 1}})
+    assert trained_camera(str(tmp_path)) == {"width": 96, "height": 72, "hfov_deg": 42.0}
+    policy.save(tmp_path / "bare.pt")
+    assert trained_camera(str(tmp_path / "bare.pt")) == {}
+    with pytest.raises(FileNotFoundError, match="missing.pt"):
+        trained_camera(str(tmp_path / "missing.pt"))

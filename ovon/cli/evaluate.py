@@ -27,8 +27,9 @@ def register(sub) -> None:
     p.add_argument("--seeds", default="0")
     p.add_argument("--episodes", type=int, default=None, help="episodes per split (default: all)")
     p.add_argument("--noise", default="", help="e.g. actuation,odometry or actuation:movebase*0.5")
-    p.add_argument("--preset", choices=["cpu", "paper"], default="cpu",
-                   help="cpu: 160x120 frames; paper: the 360x640 Stretch camera")
+    p.add_argument("--preset", choices=["auto", "cpu", "paper"], default="auto",
+                   help="cpu: 160x120 frames; paper: the 360x640 Stretch camera; auto: the camera a policy "
+                        "checkpoint was trained with, else cpu")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="config override, e.g. sim.camera.width=224 or task.max_steps=300")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
@@ -66,6 +67,22 @@ def _agent_kwargs(items: list[str], checkpoint: str | None) -> dict:
     return kwargs
 
 
+def trained_camera(checkpoint: str) -> dict:
+    """Camera fields a policy checkpoint was trained with ({} when it does not say): a policy sees the
+    world through the resolution it learned on unless the user asks otherwise."""
+    import torch
+
+    from ovon.config.sim import CameraConfig
+
+    path = Path(checkpoint)
+    path = path / "policy.pt" if path.is_dir() else path
+    if not path.is_file():
+        raise FileNotFoundError(f"policy checkpoint {path} does not exist; pass the policy.pt written by ovon train")
+    extra = torch.load(path, map_location="cpu", weights_only=True).get("extra", {}) or {}
+    fields = {f.name for f in dataclasses.fields(CameraConfig)}
+    return {k: v for k, v in (extra.get("camera") or {}).items() if k in fields and k != "backend"}
+
+
 def cmd_evaluate(args) -> int:
     from ovon.evaluate.harness import EvalConfig, apply_overrides, evaluate, parse_noise
 
@@ -83,6 +100,12 @@ def cmd_evaluate(args) -> int:
     )
     if args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
+    elif args.preset == "auto" and args.agent == "policy" and cfg.agent_kwargs.get("checkpoint"):
+        camera = trained_camera(cfg.agent_kwargs["checkpoint"])
+        if camera:
+            cfg = dataclasses.replace(cfg, sim=dataclasses.replace(
+                cfg.sim, camera=dataclasses.replace(cfg.sim.camera, **camera)))
+            print(f"camera of the checkpoint: {camera['width']}x{camera['height']} (--preset cpu|paper overrides)")
     cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, noise=parse_noise(args.noise)))
     cfg = apply_overrides(cfg, args.set)
     summary = evaluate(cfg, args.out, progress=not args.no_progress)

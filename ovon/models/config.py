@@ -63,6 +63,20 @@ class PolicyConfig:
     act_mode: Literal["kv", "recompute"] = "kv"
     # LSTM core width; 0 = chosen so the core's parameter count matches the transformer core's.
     lstm_hidden: int = 0
+    # Append, per text-aligned part of the image embedding (oracle-vl: global + grid cells; SigLIP:
+    # the whole embedding), its dot product, cosine and norm against the unit goal embedding. This is
+    # the image-text score a VLM agent computes anyway (VLFM's value map); a linear input layer cannot
+    # form a product of two of its inputs, and learning it costs far more steps than a CPU run has.
+    goal_similarity: bool = False
+
+
+def text_aligned_parts(cfg: EncoderConfig) -> int:
+    """How many goal-text-space vectors (each `text_dim` long) open the image embedding."""
+    if cfg.image == "oracle-vl":
+        return cfg.oracle_grid * cfg.oracle_grid + (1 if cfg.oracle_global else 0)
+    if cfg.image == "siglip":
+        return 1
+    return 0  # a trainable CNN's features are not in the text space
 
 
 def _encoder_presets() -> dict[str, EncoderConfig]:

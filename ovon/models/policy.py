@@ -1,6 +1,9 @@
 """Actor-critic policy over per-step embeddings (baselines.md), shared by BC, DAgger and PPO.
 
-    o_t = [image_emb, goal_emb, prev_action_emb]  ->  Linear(hidden)  ->  core  ->  action / critic heads
+    o_t = [image_emb, goal_emb, prev_action_emb (, goal similarity)]  ->  Linear(hidden)  ->  core  ->  heads
+
+With `cfg.goal_similarity` the input also holds, per text-aligned part of the image embedding, its dot
+product, cosine and norm against the unit goal embedding (3 numbers per part).
 
 `prev_action_emb` is `nn.Embedding(num_actions + 1, prev_action_dim)` indexed by previous action + 1,
 0 at an episode start (callers pass -1 there; it is forced to 0 at every start anyway).
@@ -18,7 +21,7 @@ from torch import nn
 from torch.distributions import Categorical
 
 from ovon.config.base import from_dict, to_dict
-from ovon.models.config import EncoderConfig, PolicyConfig
+from ovon.models.config import EncoderConfig, PolicyConfig, text_aligned_parts
 from ovon.models.lstm import LSTMCore, matched_lstm_hidden, transformer_core_params
 from ovon.models.transformer import TransformerCore
 
@@ -50,8 +53,16 @@ class ActorCritic(nn.Module):
             self.image_encoder = CNNEncoder(
                 encoder_cfg.cnn_dim, encoder_cfg.cnn_channels, encoder_cfg.cnn_depth, encoder_cfg.cnn_max_depth
             )
+        self.sim_parts = 0
+        if cfg.goal_similarity:
+            if encoder_cfg is None:
+                raise ValueError("policy.goal_similarity needs the encoder config (which parts are text-aligned)")
+            self.sim_parts = text_aligned_parts(encoder_cfg)
+            if self.sim_parts == 0 or self.sim_parts * text_dim > image_dim:
+                raise ValueError(f"policy.goal_similarity: image encoder {encoder_cfg.image!r} has no goal-text-space "
+                                 "parts; set policy.goal_similarity=false")
         self.prev_action_emb = nn.Embedding(cfg.num_actions + 1, cfg.prev_action_dim)
-        self.input_proj = nn.Linear(self.obs_dim + cfg.prev_action_dim, cfg.hidden)
+        self.input_proj = nn.Linear(self.obs_dim + cfg.prev_action_dim + 3 * self.sim_parts, cfg.hidden)
         self.core = self._make_core(cfg)
         self.action_head = nn.Linear(self.core.out_dim, cfg.num_actions)
         self.critic_head = nn.Linear(self.core.out_dim, 1)
@@ -91,8 +102,20 @@ class ActorCritic(nn.Module):
         idx = (prev_actions.long() + 1).clamp(0, self.cfg.num_actions)
         if starts is not None:
             idx = torch.where(starts.bool(), torch.zeros_like(idx), idx)
-        x = torch.cat([obs_emb, self.prev_action_emb(idx).to(obs_emb.dtype)], -1)
-        return self.input_proj(x)
+        x = [obs_emb, self.prev_action_emb(idx).to(obs_emb.dtype)]
+        if self.sim_parts:
+            x.append(self.goal_similarity(obs_emb))
+        return self.input_proj(torch.cat(x, -1))
+
+    def goal_similarity(self, obs_emb: torch.Tensor) -> torch.Tensor:
+        """(..., image_dim + text_dim) -> (..., 3 * parts): dot, cosine and norm of each text-aligned part
+        against the unit goal embedding."""
+        parts = obs_emb[..., : self.sim_parts * self.text_dim].reshape(*obs_emb.shape[:-1], self.sim_parts, -1)
+        goal = obs_emb[..., self.image_dim :]
+        goal = goal / goal.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        dot = (parts * goal.unsqueeze(-2)).sum(-1)
+        norm = parts.norm(dim=-1)
+        return torch.cat([dot, dot / norm.clamp_min(1e-6), norm], -1)
 
     # ----- training -----
     def forward_seq(

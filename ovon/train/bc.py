@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from ovon.config.base import to_dict
 from ovon.task.episode import EpisodeSpec
@@ -26,6 +25,7 @@ from ovon.train import distributed as dist
 from ovon.train.checkpoint import atomic_torch_save, seed_everything, set_rng_state
 from ovon.train.common import (
     build_train_policy,
+    imitation_loss,
     load_init_policy,
     load_online,
     rank_text_table,
@@ -251,7 +251,8 @@ def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | P
             obs = policy.make_obs(features(policy, b["image"]), b["goal"])
             logits, values = model(obs, b["prev"], b["starts"])
             m = b["mask"]
-            loss = F.cross_entropy(logits[m], b["action"][m]) + 0.0 * values.sum()
+            target = torch.where(m, b["action"], torch.full_like(b["action"], -1))
+            loss = imitation_loss(logits, target, cfg.stop_loss_weight) + 0.0 * values.sum()
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)

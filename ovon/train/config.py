@@ -107,6 +107,9 @@ class TrainConfig:
     lr: float = 2.5e-4
     adam_eps: float = 1e-5
     max_grad_norm: float = 0.2
+    # Imitation (BC, DAgger): weight of the STOP class in the cross-entropy. STOP is ~1% of the labels
+    # but one missing STOP turns a found goal into a failure.
+    stop_loss_weight: float = 1.0
     ppo: PPOConfig = field(default_factory=PPOConfig)
     finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
@@ -128,22 +131,24 @@ def _paper() -> TrainConfig:
 
 def _cpu_small() -> TrainConfig:
     return TrainConfig(
-        policy=PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=16),
+        policy=PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=16,
+                            goal_similarity=True),
         encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=2, oracle_global=True,
                               oracle_depth_grid=(4, 6)),
         sim=SimConfig(camera=CameraConfig(width=96, height=72)),
         task=TaskConfig(max_steps=300),
-        num_envs=4,
+        num_envs=8,
         env_workers=2,
         rollout_steps=64,
         total_steps=2_000_000,
         lr=5e-4,
         max_grad_norm=0.5,
+        stop_loss_weight=5.0,
         finetune=FinetuneConfig(critic_lr=5e-4, actor_lr=1e-4, scale=0.1),
         bc=BCConfig(record_episodes=200, record_workers=2, batch_chunks=16, epochs=20),
         # beta 1 -> 0: a randomly initialised student that drives alone just spins (turn labels only) and
         # never visits the states where the expert says "forward" or STOP.
-        dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=300, buffer_rollouts=32, grad_steps=8,
+        dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=200, buffer_rollouts=32, grad_steps=8,
                             sample_rollouts=2),
         checkpoint_every=20,
     )

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
@@ -24,6 +23,7 @@ from ovon.train.checkpoint import set_rng_state
 from ovon.train.common import (
     episode_summary,
     features,
+    imitation_loss,
     load_online,
     map_images,
     num_updates,
@@ -109,7 +109,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                                        torch.cat([p[3] for p in parts]).to(dev))
                 target = torch.cat([p[4] for p in parts]).to(dev)
                 valid = target >= 0
-                loss = F.cross_entropy(logits[valid], target[valid]) + 0.0 * values.sum()  # critic: DDP sees it
+                loss = imitation_loss(logits, target, cfg.stop_loss_weight) + 0.0 * values.sum()  # DDP sees critic
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)
