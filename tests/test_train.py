@@ -319,3 +319,19 @@ def test_evaluate_uses_the_camera_a_policy_was_trained_with(tmp_path) -> None:
     assert trained_camera(str(tmp_path / "bare.pt")) == {}
     with pytest.raises(FileNotFoundError, match="missing.pt"):
         trained_camera(str(tmp_path / "missing.pt"))
+
+
+def test_expert_config_reaches_the_labelling_expert() -> None:
+    """`--set frontier_expert.KEY=V` changes the expert that labels DAgger / BC states."""
+    from ovon.config.base import ConfigError, build
+    from ovon.train.config import TrainConfig, train_preset
+    from ovon.train.rollout import expert_config, make_expert
+
+    cfg = build(TrainConfig, train_preset("tiny"), None, ["frontier_expert.turn_speed_deg=2.5",
+                                                          "shortest_path_expert.turn_threshold_deg=30"])
+    assert make_expert("frontier", expert_config(cfg)).cfg.turn_speed_deg == 2.5
+    sp = dataclasses.replace(cfg, expert="shortest-path")
+    assert make_expert("shortest-path", expert_config(sp)).cfg.turn_threshold_deg == 30
+    assert make_expert("frontier").cfg.turn_speed_deg == 10.0  # spec default without a config
+    with pytest.raises(ConfigError, match="turn_sped_deg"):
+        build(TrainConfig, train_preset("tiny"), None, ["frontier_expert.turn_sped_deg=1"])

@@ -35,6 +35,7 @@ from ovon.train.common import (
 )
 from ovon.train.config import TrainConfig, reward_for
 from ovon.train.logging import RunLogger
+from ovon.train.rollout import expert_config
 
 SHARD_FORMAT = "ovon-bc-shard-v1"
 
@@ -50,7 +51,7 @@ def _record_job(job: dict) -> dict:
     if path.exists():
         return {"path": str(path), "episodes": -1}
     slot = EnvSlot(SlotConfig(job["specs"], job["sim"], job["task"], job["encoder"], job["table"],
-                              job["expert"], job["seed"]))
+                              job["expert"], job["seed"], expert_cfg=job.get("expert_cfg")))
     images: list[Any] = []
     prev, act, ep_of, lengths, goals, goal_text, metrics = [], [], [], [], [], [], []
     try:
@@ -123,7 +124,8 @@ def record_shards(cfg: TrainConfig, specs: list[EpisodeSpec], shard_dir: str | P
             remap = {old: new for new, old in enumerate(idx)}
             jobs.append({"path": str(shard_dir / f"shard_{len(jobs):05d}.pt"), "specs": [specs[j] for j in idx],
                          "items": [(remap[a], s) for a, s in part], "sim": cfg.sim, "task": reward_for(cfg, False),
-                         "encoder": cfg.encoder, "table": tab, "expert": cfg.expert, "seed": cfg.seed + len(jobs)})
+                         "encoder": cfg.encoder, "table": tab, "expert": cfg.expert, "seed": cfg.seed + len(jobs),
+                         "expert_cfg": expert_config(cfg)})
     results = []
     with progress_bar("recording expert shards", len(jobs), progress) as bar:
         for r in run_jobs(_record_job, jobs, workers=cfg.bc.record_workers if workers is None else workers):

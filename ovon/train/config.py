@@ -14,6 +14,7 @@ from typing import Literal
 
 from ovon.config.sim import CameraConfig, SimConfig
 from ovon.config.task import RewardConfig, TaskConfig
+from ovon.experts.config import FrontierExpertConfig, ShortestPathExpertConfig
 from ovon.models.config import EncoderConfig, PolicyConfig
 
 Algo = Literal["bc", "dagger", "ppo"]
@@ -95,6 +96,8 @@ class TrainConfig:
     sim: SimConfig = field(default_factory=lambda: SimConfig(camera=CameraConfig(width=160, height=120)))
     task: TaskConfig = field(default_factory=TaskConfig)
     expert: ExpertName = "frontier"
+    frontier_expert: FrontierExpertConfig = field(default_factory=FrontierExpertConfig)
+    shortest_path_expert: ShortestPathExpertConfig = field(default_factory=ShortestPathExpertConfig)
     # Environments / rollouts (per rank).
     num_envs: int = 32
     env_workers: int = -1  # processes for the envs: -1 = one per env, 0 = in this process

@@ -94,7 +94,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 finished += batch.metrics
             t1 = time.perf_counter()
             # ---- learn: cross-entropy on the expert's labels over (num_envs, T) chunks -----------------
-            buffer.append((stack_images(images, 1), torch.stack(goals, 1), torch.stack(prevs, 1),
+            buffer.append((_compact(stack_images(images, 1)), torch.stack(goals, 1), torch.stack(prevs, 1),
                            torch.stack(starts, 1), torch.stack(labels, 1)))
             del buffer[: max(0, len(buffer) - cfg.dagger.buffer_rollouts)]
             policy.train()
@@ -135,6 +135,12 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
         logger.close()
         envs.close()
     return last
+
+
+def _compact(images: object) -> object:
+    """Frozen-encoder embeddings are kept in float16 in the buffer (half the memory of a long DAgger
+    dataset); `features` turns them back into float32."""
+    return images.half() if isinstance(images, torch.Tensor) and images.is_floating_point() else images
 
 
 def _cat(items: list) -> object:

@@ -40,6 +40,7 @@ class SlotConfig:
     expert: str | None  # "frontier" | "shortest-path" | None (no labels)
     seed: int
     scene_repeat: int = 4
+    expert_cfg: Any = None  # FrontierExpertConfig / ShortestPathExpertConfig; None = the expert's defaults
 
 
 @dataclass
@@ -53,17 +54,18 @@ class StepOut:
     metrics: dict | None = None  # metrics of the episode that just ended
 
 
-def make_expert(name: str):
+def make_expert(name: str, cfg: Any = None):
+    """The labelling expert named `name`, with its config `cfg` (None = defaults)."""
     if name == "frontier":
         from ovon.experts.config import FrontierExpertConfig
         from ovon.experts.frontier_expert import FrontierExpert
 
-        return FrontierExpert(FrontierExpertConfig())
+        return FrontierExpert(cfg or FrontierExpertConfig())
     if name == "shortest-path":
         from ovon.experts.config import ShortestPathExpertConfig
         from ovon.experts.shortest_path import ShortestPathExpert
 
-        return ShortestPathExpert(ShortestPathExpertConfig())
+        return ShortestPathExpert(cfg or ShortestPathExpertConfig())
     raise ValueError(f"unknown expert {name!r}; valid: frontier, shortest-path")
 
 
@@ -84,7 +86,7 @@ class EnvSlot:
             from ovon.models.encoders import make_image_encoder
 
             self.encoder = make_image_encoder(cfg.encoder, self.text)
-        self.expert = make_expert(cfg.expert) if cfg.expert else None
+        self.expert = make_expert(cfg.expert, cfg.expert_cfg) if cfg.expert else None
         self.by_scene: dict[str, list[int]] = {}
         for i, s in enumerate(cfg.specs):
             self.by_scene.setdefault(s.scene, []).append(i)
@@ -276,11 +278,12 @@ class VecEnv:
         seed: int,
         workers: int = -1,
         scene_repeat: int = 4,
+        expert_cfg: Any = None,
     ) -> None:
         table = {k: np.asarray(v, dtype=np.float32) for k, v in text_table.items()}
         self.num_envs = num_envs
         cfgs = [
-            SlotConfig(part, sim, task, encoder, table, expert, seed * 10007 + i, scene_repeat)
+            SlotConfig(part, sim, task, encoder, table, expert, seed * 10007 + i, scene_repeat, expert_cfg)
             for i, part in enumerate(split_specs(specs, num_envs))
         ]
         workers = num_envs if workers < 0 else min(workers, num_envs)
@@ -368,4 +371,9 @@ def make_vec_env(cfg, specs: list[EpisodeSpec], task: TaskConfig, text_table: di
     """The trainer's envs from a `TrainConfig` (seeded by config seed and rank)."""
     return VecEnv(specs, cfg.num_envs, cfg.sim, task, cfg.encoder, text_table,
                   cfg.expert if label else None, seed=cfg.seed * 1000 + rank,
-                  workers=cfg.env_workers, scene_repeat=cfg.scene_repeat)
+                  workers=cfg.env_workers, scene_repeat=cfg.scene_repeat, expert_cfg=expert_config(cfg))
+
+
+def expert_config(cfg) -> Any:
+    """The `TrainConfig`'s config for its labelling expert."""
+    return cfg.frontier_expert if cfg.expert == "frontier" else cfg.shortest_path_expert
