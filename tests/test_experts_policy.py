@@ -207,3 +207,28 @@ def test_frontier_search_queue_grows():
     ex._bg = np.empty((32, 2), dtype=np.int64)
     _, a, _ = rollout(ex, grid, start, [(goal, 0.0)], max_steps=80)
     assert a == a_ref and ex._bcell.shape[1] > 2
+
+
+def test_frontier_expert_replan_into_look_mode_has_no_path():
+    """Regression (found in a DAgger run): when the agent strays from its path, the re-plan may pick a
+    frontier at the agent's feet ("look" mode, which has no path); the expert then indexed the empty path."""
+    rng = np.random.default_rng(3)
+    free, nav = room_grid(120, 120, rng, room_m=3.0, cell_size=CS)
+    grid = grid_from_arrays(free, nav, CS)
+    ex = FrontierExpert()
+    start = grid.random_point(rng, min_island_radius=1.0)
+    ex.reset(grid, [(grid.random_point(rng), 0.0)], AgentState(start, 0.0))
+    ex.act(AgentState(start, 0.0))
+    assert ex.target is not None and not ex._look and ex._path_r.size > 0
+
+    def choose_look(state, row, col):  # what `_choose` does when every frontier is within reach
+        ex._clear_target()
+        ex.target, ex._look = (row, col), True
+
+    ex._needs_choice = lambda *a: False
+    ex._no_progress = lambda *a: False
+    ex._choose = choose_look
+    path_end = grid.cell_to_world(int(ex._path_r[-1]), int(ex._path_c[-1]))
+    far = max((grid.random_point(rng) for _ in range(50)), key=lambda p: np.hypot(*(p - path_end)[[0, 2]]))
+    assert ex.act(AgentState(far, 0.0), last_action=1) in (0, 1, 2, 3)
+    assert ex.mode == "look"

@@ -209,6 +209,8 @@ class FrontierExpert:
             self._choose(state, row, col)
             if self.target is None:
                 return None
+            if self._look:  # the new target is a frontier at the agent's feet: no path to follow
+                return self._look_error(state)
             n = self._path_r.shape[0]
             i, d2 = nearest_path_index(self._path_r, self._path_c, 0, min(n, 4 * la), row, col)
         self._path_i = i
