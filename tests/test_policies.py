@@ -241,3 +241,18 @@ def test_goal_similarity_features() -> None:
     assert torch.allclose(lg, logits[:, 0], atol=1e-5)
     with pytest.raises(ValueError, match="goal_similarity"):
         build_policy(policy_preset("tiny", goal_similarity=True), 32, TXT, EncoderConfig(image="cnn", cnn_dim=32))
+
+
+@pytest.mark.parametrize("core", ["transformer", "lstm"])
+def test_without_previous_action_input(core: str) -> None:
+    """prev_action_dim=0: the previous action cannot change the output; acting still equals forward."""
+    p = _policy(core, prev_action_dim=0)
+    assert p.prev_action_emb is None and p.parameter_groups()["prev_action"] == []
+    obs, prev = _data(2, 6)
+    logits, _ = p(obs, prev)
+    other, _ = p(obs, (prev + 1) % 6)
+    assert torch.equal(logits, other)
+    st = p.init_state(2)
+    for t in range(6):
+        lg, _, st = p.act_step(obs[:, t], prev[:, t], st, torch.full((2,), t == 0))
+        assert torch.allclose(lg, logits[:, t], atol=1e-5)

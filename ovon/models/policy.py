@@ -61,7 +61,9 @@ class ActorCritic(nn.Module):
             if self.sim_parts == 0 or self.sim_parts * text_dim > image_dim:
                 raise ValueError(f"policy.goal_similarity: image encoder {encoder_cfg.image!r} has no goal-text-space "
                                  "parts; set policy.goal_similarity=false")
-        self.prev_action_emb = nn.Embedding(cfg.num_actions + 1, cfg.prev_action_dim)
+        # prev_action_dim 0 = no previous-action input: with little data the policy otherwise learns to
+        # repeat its last action (the "copycat" shortcut) and keeps pressing MOVE_FORWARD into walls.
+        self.prev_action_emb = nn.Embedding(cfg.num_actions + 1, cfg.prev_action_dim) if cfg.prev_action_dim else None
         self.input_proj = nn.Linear(self.obs_dim + cfg.prev_action_dim + 3 * self.sim_parts, cfg.hidden)
         self.core = self._make_core(cfg)
         self.action_head = nn.Linear(self.core.out_dim, cfg.num_actions)
@@ -102,7 +104,9 @@ class ActorCritic(nn.Module):
         idx = (prev_actions.long() + 1).clamp(0, self.cfg.num_actions)
         if starts is not None:
             idx = torch.where(starts.bool(), torch.zeros_like(idx), idx)
-        x = [obs_emb, self.prev_action_emb(idx).to(obs_emb.dtype)]
+        x = [obs_emb]
+        if self.prev_action_emb is not None:
+            x.append(self.prev_action_emb(idx).to(obs_emb.dtype))
         if self.sim_parts:
             x.append(self.goal_similarity(obs_emb))
         return self.input_proj(torch.cat(x, -1))
@@ -203,7 +207,7 @@ class ActorCritic(nn.Module):
         return {
             "critic": list(self.critic_head.parameters()),
             "actor": actor,
-            "prev_action": list(self.prev_action_emb.parameters()),
+            "prev_action": [] if self.prev_action_emb is None else list(self.prev_action_emb.parameters()),
         }
 
     def num_params(self, part: str | None = None) -> int:

@@ -84,7 +84,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
         critic_lr, actor_lr = finetune_lrs(cfg.finetune, 0)
         param_groups = [{"params": groups["critic"], "lr": critic_lr, "name": "critic"},
                         {"params": groups["actor"], "lr": actor_lr, "name": "actor"}]
-        if not cfg.finetune.freeze_prev_action:
+        if not cfg.finetune.freeze_prev_action and groups["prev_action"]:
             param_groups.append({"params": groups["prev_action"], "lr": actor_lr, "name": "prev_action"})
         optimizer = torch.optim.Adam(param_groups, eps=cfg.adam_eps)
     else:
