@@ -271,3 +271,21 @@ def test_oracle_depth_grid_with_nothing_visible_keeps_the_size():
     enc.set_scene({1: "couch"})
     out = enc.encode({"semantic": np.zeros((2, 4, 6), np.int32), "depth": np.ones((2, 4, 6), np.float32)})
     assert out.shape == (2, enc.dim)
+
+
+def test_oracle_collision_flag_is_the_last_dim():
+    from ovon.models.encoders import image_encoder_dim
+    from ovon.models.encoders.oracle_vl import OracleVLEncoder
+
+    enc = OracleVLEncoder(FunctionTextEncoder(lambda n: np.ones((len(n), 4), np.float32), 4), grid=1,
+                          include_global=False, depth_grid=(2, 2), collision=True)
+    enc.set_scene({1: "couch"})
+    batch = {"semantic": np.ones((2, 4, 6), np.int32), "depth": np.ones((2, 4, 6), np.float32),
+             "collided": np.array([1, 0])}
+    out = enc.encode(batch)
+    assert out.shape == (2, 4 + 8 + 1) and enc.dim == 13
+    assert out[:, -1].tolist() == [1.0, 0.0]
+    cfg = EncoderConfig(oracle_grid=1, oracle_global=False, oracle_depth_grid=(2, 2), oracle_collision=True)
+    assert image_encoder_dim(cfg, 4) == 13
+    with pytest.raises(KeyError, match="collided"):
+        enc.encode({"semantic": batch["semantic"], "depth": batch["depth"]})

@@ -52,7 +52,8 @@ def test_check_env():
 def test_observations_and_privileged_semantic():
     env = make()
     obs, info = env.reset(seed=1)
-    assert set(obs) == {"rgb", "depth", "odometry", "goal"}
+    assert set(obs) == {"rgb", "depth", "odometry", "goal", "collided"}
+    assert obs["collided"] == 0
     assert obs["rgb"].shape == (48, 64, 3) and obs["rgb"].dtype == np.uint8
     assert obs["depth"].shape == (48, 64) and obs["depth"].dtype == np.float32
     assert obs["odometry"].dtype == np.float32
@@ -254,3 +255,20 @@ def test_cli_sim_view_and_bench(tmp_path, capsys):
     last = capsys.readouterr().out.strip().splitlines()[-1]
     value, unit = last.split(" ", 1)
     assert unit == "steps/s" and float(value) > 0
+
+
+def test_collision_flag_in_the_observation():
+    """Walking straight into the room's wall: the flag is 0 while free, 1 once MOVE_FORWARD is blocked,
+    and it agrees with info["collided"]."""
+    env = make()
+    obs, _ = env.reset(options=given())
+    flags, infos = [], []
+    for _ in range(40):
+        obs, _, term, trunc, info = env.step(MOVE_FORWARD)
+        flags.append(obs["collided"])
+        infos.append(info["collided"])
+        assert env.observation_space.contains(obs)
+        if term or trunc:
+            break
+    assert flags[0] == 0 and flags[-1] == 1
+    assert flags == [int(c) for c in infos]

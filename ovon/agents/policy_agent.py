@@ -68,6 +68,7 @@ class PolicyAgent:
             batch = {"semantic": p.frame.semantic[None], "depth": observation["depth"][None]}
         else:
             batch = {"rgb": observation["rgb"][None], "depth": observation["depth"][None]}
+        batch["collided"] = np.array([observation.get("collided", 0)])
         return self.image_encoder.encode(batch).to(self.device)
 
     @torch.no_grad()

@@ -34,6 +34,9 @@ class EncoderConfig:
     oracle_grid: int = 2  # grid x grid spatial cells
     oracle_global: bool = True  # prepend the whole-frame pooled vector
     oracle_depth_grid: tuple[int, int] = (0, 0)  # append coarse depth (rows, cols); (0, 0) = none
+    # Append the collision flag of the last step (a bump sensor, not privileged). Low furniture right in
+    # front of the agent is below the camera's view, so without it a blocked MOVE_FORWARD looks like a free one.
+    oracle_collision: bool = False
     oracle_noise_std: float = 0.0  # per-instance noise norm relative to the unit text embedding
     oracle_dropout: float = 0.0  # probability that a visible instance is missed in a frame
     oracle_seed: int = 0

@@ -92,6 +92,8 @@ class ObjectNavEnv(gym.Env):
                 np.float32,
             ),
             "goal": spaces.Text(MAX_GOAL_LEN, min_length=1, charset=GOAL_CHARSET),
+            # 1 when the step that led here was blocked (a bump sensor; task.md reports it each step)
+            "collided": spaces.Discrete(2),
         }
         if privileged:
             obs["semantic"] = spaces.Box(0, np.iinfo(np.int32).max, (cam.height, cam.width), np.int32)
@@ -194,7 +196,7 @@ class ObjectNavEnv(gym.Env):
         eye = self._state.position + np.array([0.0, self.sim_cfg.camera.camera_height, 0.0])
         return self._world.renderer.render(eye, self._state.yaw, self._state.pitch)
 
-    def _obs(self, odometry: np.ndarray) -> dict:
+    def _obs(self, odometry: np.ndarray, collided: bool = False) -> dict:
         cam = self.sim_cfg.camera
         depth = self._frame.depth
         depth = np.where(depth > 0, np.clip(depth, cam.min_depth, cam.max_depth), cam.max_depth)
@@ -203,6 +205,7 @@ class ObjectNavEnv(gym.Env):
             "depth": depth.astype(np.float32, copy=False),
             "odometry": odometry.astype(np.float32),
             "goal": self.spec_episode.goal_category,
+            "collided": int(collided),
         }
         if self.privileged_obs:
             obs["semantic"] = self._frame.semantic
@@ -237,7 +240,7 @@ class ObjectNavEnv(gym.Env):
         info["collided"] = result.collided
         if terminated or truncated:
             info["metrics"] = self._tracker.metrics().to_dict()
-        return self._obs(odo), reward, terminated, truncated, info
+        return self._obs(odo, result.collided), reward, terminated, truncated, info
 
     def render(self):
         return self._frame.rgb

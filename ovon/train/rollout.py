@@ -154,7 +154,8 @@ class EnvSlot:
         if self.encoder is None:
             return {"rgb": obs["rgb"], "depth": obs["depth"]}
         return self.encoder.encode({"rgb": obs["rgb"][None], "depth": obs["depth"][None],
-                                    "semantic": obs["semantic"][None]})[0].numpy()
+                                    "semantic": obs["semantic"][None],
+                                    "collided": np.array([obs.get("collided", 0)])})[0].numpy()
 
     def step(self, action: int, auto_reset: bool = True) -> StepOut:
         """Step; at an episode end the returned observation is the next episode's first (auto-reset),

@@ -51,6 +51,7 @@ def make_image_encoder(cfg: EncoderConfig | None = None, text_encoder: TextEncod
             dropout=cfg.oracle_dropout,
             seed=cfg.oracle_seed,
             depth_grid=cfg.oracle_depth_grid,
+            collision=cfg.oracle_collision,
         )
     if cfg.image == "siglip":
         from ovon.models.encoders.siglip import SiglipImageEncoder
@@ -67,7 +68,8 @@ def image_encoder_dim(cfg: EncoderConfig, text_dim: int = 384) -> int | None:
     """Output size without building the encoder (None for SigLIP: read it from the model)."""
     if cfg.image == "oracle-vl":
         depth = 2 * cfg.oracle_depth_grid[0] * cfg.oracle_depth_grid[1]
-        return (cfg.oracle_grid**2 + (1 if cfg.oracle_global else 0)) * text_dim + depth
+        bump = 1 if cfg.oracle_collision else 0
+        return (cfg.oracle_grid**2 + (1 if cfg.oracle_global else 0)) * text_dim + depth + bump
     if cfg.image == "cnn":
         return cfg.cnn_dim
     return None

@@ -5,8 +5,8 @@ same space as the goal text so that open-vocabulary generalisation can be studie
 writes, for every visible instance, the text embedding of its category weighted by its pixel-area
 fraction. Every report that uses it must say "oracle perception".
 
-Layout of the output (dim = (global + grid*grid) * text_dim):
-  [ global part (text_dim) | cell (0,0) | cell (0,1) | ... | cell (g-1,g-1) ]  (cells row-major)
+Layout of the output (dim = (global + grid*grid) * text_dim [+ depth grid] [+ collision flag]):
+  [ global part (text_dim) | cell (0,0) | ... | cell (g-1,g-1) | depth mean, min per cell | collided ]
 Each part is sum_i (pixels of instance i in the region / pixels of the region) * e_i, where e_i is
 the unit text embedding of the instance's category (background id 0 and unknown ids contribute
 nothing). The vectors are not normalised, so their length tells how much of the region is covered by
@@ -46,6 +46,7 @@ class OracleVLEncoder:
         seed: int = 0,
         depth_grid: tuple[int, int] = (0, 0),
         max_depth: float = 5.0,
+        collision: bool = False,
     ) -> None:
         if grid < 1:
             raise ValueError(f"oracle grid must be >= 1, got {grid}")
@@ -65,7 +66,8 @@ class OracleVLEncoder:
         self.depth_grid = (int(depth_grid[0]), int(depth_grid[1]))
         self.max_depth = float(max_depth)
         self.depth_dim = 2 * self.depth_grid[0] * self.depth_grid[1]
-        self.dim = self.parts * self.text_dim + self.depth_dim
+        self.collision = bool(collision)  # append the observation's "collided" flag (last dim)
+        self.dim = self.parts * self.text_dim + self.depth_dim + (1 if self.collision else 0)
         self._shared: tuple[np.ndarray, np.ndarray] | None = None
         self._per_env: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._cells: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
@@ -175,7 +177,11 @@ class OracleVLEncoder:
             if depth.ndim == 2:
                 depth = depth[None]
             out = np.concatenate([out, np.stack([self.encode_depth(d) for d in depth])], axis=1)
-        return torch.from_numpy(out)
+        if self.collision:
+            bump = get_obs(batch, "collided")
+            bump = np.asarray(bump.cpu().numpy() if isinstance(bump, torch.Tensor) else bump, np.float32)
+            out = np.concatenate([out, bump.reshape(len(out), 1)], axis=1)
+        return torch.from_numpy(out.astype(np.float32, copy=False))
 
     def text_aligned(self, image_emb: torch.Tensor) -> torch.Tensor:
         """The part of the embedding that lives in the goal-text space: (B, dim) -> (B, text_dim)."""
