@@ -256,3 +256,33 @@ def test_without_previous_action_input(core: str) -> None:
     for t in range(6):
         lg, _, st = p.act_step(obs[:, t], prev[:, t], st, torch.full((2,), t == 0))
         assert torch.allclose(lg, logits[:, t], atol=1e-5)
+
+
+def test_policy_agent_sampling_temperature(tmp_path) -> None:
+    """A near-zero temperature samples the argmax; temperature <= 0 is refused; sampling is seeded per
+    episode, so the same episode seed replays the same actions."""
+    import numpy as np
+
+    from ovon.agents.policy_agent import PolicyAgent
+
+    enc = dataclasses.replace(EncoderConfig(image="cnn"), cnn_dim=IMG, cnn_channels=(8, 8))
+    torch.manual_seed(0)
+    p = build_policy(policy_preset("tiny"), IMG, TXT, enc)
+    with torch.no_grad():
+        p.action_head.weight.normal_(0, 1.0)  # a peaked, input-dependent action distribution
+    p.save(tmp_path / "p.pt", extra={"text_table": {"couch": torch.randn(TXT)}})
+    rng = np.random.default_rng(0)
+    frames = [{"rgb": rng.integers(0, 255, (32, 32, 3), dtype=np.uint8),
+               "depth": rng.uniform(0.5, 5, (32, 32)).astype(np.float32), "goal": "couch"} for _ in range(8)]
+
+    def run(agent, seed=0):
+        agent.reset({"seed": seed})
+        return [agent.act(f) for f in frames]
+
+    greedy = run(PolicyAgent(str(tmp_path / "p.pt"), deterministic=True))
+    assert run(PolicyAgent(str(tmp_path / "p.pt"), deterministic=False, temperature=1e-4)) == greedy
+    hot = PolicyAgent(str(tmp_path / "p.pt"), deterministic=False, temperature=50.0)
+    assert run(hot, 3) == run(hot, 3)
+    assert len({tuple(run(hot, s)) for s in range(5)}) > 1
+    with pytest.raises(ValueError, match="temperature"):
+        PolicyAgent(str(tmp_path / "p.pt"), deterministic=False, temperature=0.0)

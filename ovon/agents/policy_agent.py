@@ -18,7 +18,11 @@ import torch
 
 
 class PolicyAgent:
-    def __init__(self, checkpoint: str, deterministic: bool = True, device: str = "cpu", threads: int = 1) -> None:
+    def __init__(self, checkpoint: str, deterministic: bool = True, device: str = "cpu", threads: int = 1,
+                 temperature: float = 1.0) -> None:
+        """`deterministic`: argmax actions; else sample from softmax(logits / temperature) with a generator
+        seeded per episode (reproducible). Argmax can lock an imitation policy into a turn-left /
+        turn-right cycle; sampling breaks it, and a temperature < 1 keeps rare actions (STOP) rare."""
         from ovon.models.config import EncoderConfig
         from ovon.models.policy import ActorCritic
         from ovon.train.common import TableTextEncoder
@@ -31,6 +35,9 @@ class PolicyAgent:
         self.policy = ActorCritic.load(path, map_location=device).eval()
         self.device = torch.device(device)
         self.deterministic = deterministic
+        if temperature <= 0:
+            raise ValueError(f"temperature must be > 0, got {temperature}")
+        self.temperature = float(temperature)
         self.encoder_cfg = self.policy.encoder_cfg or EncoderConfig()
         extra = getattr(self.policy, "checkpoint_extra", {}) or {}
         self.text = TableTextEncoder(extra.get("text_table", {}), self.encoder_cfg)
@@ -82,7 +89,7 @@ class PolicyAgent:
         if self.deterministic:
             action = int(logits.argmax(-1).item())
         else:
-            probs = torch.softmax(logits.float(), -1).cpu()
+            probs = torch.softmax(logits.float() / self.temperature, -1).cpu()
             action = int(torch.multinomial(probs, 1, generator=self._gen).item())
         self._prev = torch.tensor([action], device=self.device)
         self._first = False
