@@ -335,3 +335,22 @@ def test_expert_config_reaches_the_labelling_expert() -> None:
     assert make_expert("frontier").cfg.turn_speed_deg == 10.0  # spec default without a config
     with pytest.raises(ConfigError, match="turn_sped_deg"):
         build(TrainConfig, train_preset("tiny"), None, ["frontier_expert.turn_sped_deg=1"])
+
+
+def test_inner_viewpoints_keep_those_close_to_a_goal_box() -> None:
+    from types import SimpleNamespace
+
+    from ovon.task.episode import GoalViewpoint
+    from ovon.train.rollout import inner_viewpoints
+
+    box = SimpleNamespace(id=7, aabb_min=np.array([0.0, 0.0, 0.0]), aabb_max=np.array([1.0, 1.0, 1.0]))
+    other = SimpleNamespace(id=8, aabb_min=np.array([5.0, 0.0, 5.0]), aabb_max=np.array([6.0, 1.0, 6.0]))
+    vps = [GoalViewpoint(np.array([1.3, 0.0, 0.5]), 0.0),   # 0.3 m from the goal box
+           GoalViewpoint(np.array([0.5, 0.0, -0.9]), 0.0),  # 0.9 m
+           GoalViewpoint(np.array([5.5, 0.0, 4.8]), 0.0)]   # next to a non-goal object only
+    p = SimpleNamespace(viewpoints=vps, goal_ids=frozenset({7}), world=SimpleNamespace(scene=SimpleNamespace(
+        objects=[box, other])))
+    assert inner_viewpoints(p, 0.4) == [vps[0]]
+    assert inner_viewpoints(p, 1.0) == vps[:2]
+    assert inner_viewpoints(p, 0.0) == vps  # 0 = all
+    assert inner_viewpoints(p, 0.1) == vps  # none that close: fall back to all

@@ -51,7 +51,8 @@ def _record_job(job: dict) -> dict:
     if path.exists():
         return {"path": str(path), "episodes": -1}
     slot = EnvSlot(SlotConfig(job["specs"], job["sim"], job["task"], job["encoder"], job["table"],
-                              job["expert"], job["seed"], expert_cfg=job.get("expert_cfg")))
+                              job["expert"], job["seed"], expert_cfg=job.get("expert_cfg"),
+                              expert_viewpoint_radius=job.get("expert_viewpoint_radius", 0.0)))
     images: list[Any] = []
     prev, act, ep_of, lengths, goals, goal_text, metrics = [], [], [], [], [], [], []
     try:
@@ -125,7 +126,7 @@ def record_shards(cfg: TrainConfig, specs: list[EpisodeSpec], shard_dir: str | P
             jobs.append({"path": str(shard_dir / f"shard_{len(jobs):05d}.pt"), "specs": [specs[j] for j in idx],
                          "items": [(remap[a], s) for a, s in part], "sim": cfg.sim, "task": reward_for(cfg, False),
                          "encoder": cfg.encoder, "table": tab, "expert": cfg.expert, "seed": cfg.seed + len(jobs),
-                         "expert_cfg": expert_config(cfg)})
+                         "expert_cfg": expert_config(cfg), "expert_viewpoint_radius": cfg.expert_viewpoint_radius_m})
     results = []
     with progress_bar("recording expert shards", len(jobs), progress) as bar:
         for r in run_jobs(_record_job, jobs, workers=cfg.bc.record_workers if workers is None else workers):

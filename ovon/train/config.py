@@ -98,6 +98,9 @@ class TrainConfig:
     expert: ExpertName = "frontier"
     frontier_expert: FrontierExpertConfig = field(default_factory=FrontierExpertConfig)
     shortest_path_expert: ShortestPathExpertConfig = field(default_factory=ShortestPathExpertConfig)
+    # > 0: the labelling expert aims at goal viewpoints within this distance (m) of a goal object's box
+    # (all viewpoints when none is), so its STOP labels come where the goal fills the view. 0 = all.
+    expert_viewpoint_radius_m: float = 0.0
     # Environments / rollouts (per rank).
     num_envs: int = 32
     env_workers: int = -1  # processes for the envs: -1 = one per env, 0 = in this process
@@ -133,12 +136,17 @@ def _paper() -> TrainConfig:
 
 
 def _cpu_small() -> TrainConfig:
+    """What learns on a 2-core CPU in tens of minutes; each departure from `paper` is there because a
+    run without it failed (see the README, "Learned baselines")."""
     return TrainConfig(
-        policy=PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=16,
+        # No previous-action input: with this little data the policy copies its last action (copycat).
+        policy=PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=0,
                             goal_similarity=True),
         encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=2, oracle_global=True,
-                              oracle_depth_grid=(4, 6)),
-        sim=SimConfig(camera=CameraConfig(width=96, height=72)),
+                              oracle_depth_grid=(6, 4), oracle_collision=True),
+        # Portrait like the Stretch camera (paper: 360x640, 42 deg HFOV): a landscape frame hides the floor
+        # and low furniture in front of the agent.
+        sim=SimConfig(camera=CameraConfig(width=72, height=128)),
         task=TaskConfig(max_steps=300),
         num_envs=8,
         env_workers=2,
@@ -146,14 +154,19 @@ def _cpu_small() -> TrainConfig:
         total_steps=2_000_000,
         lr=5e-4,
         max_grad_norm=0.5,
-        stop_loss_weight=5.0,
+        stop_loss_weight=2.0,  # 5 made the student STOP next to the wrong objects
+        # Frontiers ahead preferred (turning "costs" 2.5 deg/s instead of 10): the teacher's choices then
+        # follow what the camera sees, which a small student can imitate.
+        frontier_expert=FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5),
         finetune=FinetuneConfig(critic_lr=5e-4, actor_lr=1e-4, scale=0.1),
         bc=BCConfig(record_episodes=200, record_workers=2, batch_chunks=16, epochs=20),
         # beta 1 -> 0: a randomly initialised student that drives alone just spins (turn labels only) and
-        # never visits the states where the expert says "forward" or STOP.
-        dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=200, buffer_rollouts=32, grad_steps=8,
-                            sample_rollouts=2),
-        checkpoint_every=20,
+        # never visits the states where the expert says "forward" or STOP. The buffer keeps the last 300
+        # labelled rollouts (150k steps, float16): with a short buffer the expert-driven states are
+        # forgotten as soon as beta reaches 0 and the student collapses to turning in place.
+        dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=200, buffer_rollouts=300, grad_steps=8,
+                            sample_rollouts=4),
+        checkpoint_every=50,
     )
 
 
