@@ -152,12 +152,14 @@ def _cpu_small() -> TrainConfig:
         env_workers=2,
         rollout_steps=64,
         total_steps=2_000_000,
+        max_updates=400,  # 205k steps, ~16 min at ~220 steps/s on 2 cores
         lr=5e-4,
         max_grad_norm=0.5,
         stop_loss_weight=2.0,  # 5 made the student STOP next to the wrong objects
         # Frontiers ahead preferred (turning "costs" 2.5 deg/s instead of 10): the teacher's choices then
         # follow what the camera sees, which a small student can imitate.
         frontier_expert=FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5),
+        expert_viewpoint_radius_m=0.4,  # STOP labels where the goal fills the view (see TrainConfig)
         finetune=FinetuneConfig(critic_lr=5e-4, actor_lr=1e-4, scale=0.1),
         bc=BCConfig(record_episodes=200, record_workers=2, batch_chunks=16, epochs=20),
         # beta 1 -> 0: a randomly initialised student that drives alone just spins (turn labels only) and
