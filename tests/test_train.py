@@ -354,3 +354,34 @@ def test_inner_viewpoints_keep_those_close_to_a_goal_box() -> None:
     assert inner_viewpoints(p, 1.0) == vps[:2]
     assert inner_viewpoints(p, 0.0) == vps  # 0 = all
     assert inner_viewpoints(p, 0.1) == vps  # none that close: fall back to all
+
+
+def test_cpu_small_features_end_to_end(tmp_path: Path, house_specs, table_path: str) -> None:
+    """The inputs and labels that made cpu-small learn, at tiny size: goal similarity, depth grid and
+    collision flag from the worker's encoder, no previous-action input, the inner-viewpoint frontier
+    expert with a STOP weight; then a fine-tune that trains the (absent) prev-action group, and the agent."""
+    from ovon.agents import make_agent
+    from ovon.evaluate.runner import run_episode
+    from ovon.experts.config import FrontierExpertConfig
+    from ovon.sim.env import ObjectNavEnv
+    from ovon.train import train
+
+    cfg = train_preset("tiny", algo="dagger", text_cache=table_path, stop_loss_weight=2.0,
+                       expert_viewpoint_radius_m=0.4,
+                       frontier_expert=FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5))
+    cfg = dataclasses.replace(
+        cfg, policy=dataclasses.replace(cfg.policy, prev_action_dim=0, goal_similarity=True),
+        encoder=dataclasses.replace(cfg.encoder, oracle_depth_grid=(2, 2), oracle_collision=True),
+        dagger=dataclasses.replace(cfg.dagger, beta_start=1.0, beta_updates=2, buffer_rollouts=4, grad_steps=2))
+    last = train(cfg, house_specs, tmp_path / "dagger")
+    assert np.isfinite(last["loss"]) and 0.0 <= last["accuracy"] <= 1.0
+    ft = dataclasses.replace(cfg, algo="ppo", finetune=dataclasses.replace(cfg.finetune, freeze_prev_action=False))
+    train(ft, house_specs, tmp_path / "ft", init=str(tmp_path / "dagger"))
+    agent = make_agent("policy", checkpoint=str(tmp_path / "ft" / "policy.pt"), deterministic=False,
+                       temperature=0.5)
+    assert agent.policy.prev_action_emb is None and agent.policy.sim_parts == 1
+    assert agent.image_encoder.dim == agent.policy.image_dim  # 1 text part + 8 depth + 1 collision
+    env = ObjectNavEnv(episodes=house_specs[:1], sim=cfg.sim, task=cfg.task)
+    rec = run_episode(env, agent, house_specs[0], seed=0)
+    env.close()
+    assert 1 <= rec["steps"] <= cfg.task.max_steps
