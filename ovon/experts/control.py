@@ -17,8 +17,8 @@ import math
 import numba as nb
 import numpy as np
 
-from ovon.experts.visibility import los_clear
 from ovon.sim.collision import forward_delta, free_prefix
+from ovon.sim.los import los_clear
 
 STOP, MOVE_FORWARD, TURN_LEFT, TURN_RIGHT = 0, 1, 2, 3
 

@@ -22,41 +22,7 @@ import math
 import numba as nb
 import numpy as np
 
-
-@nb.njit(cache=True, nogil=True)
-def los_clear(transparent: np.ndarray, r0: int, c0: int, r1: int, c1: int) -> bool:
-    """Closed-supercover line of sight from cell (r0, c0) to (r1, c1), endpoints excluded."""
-    dr = r1 - r0
-    dc = c1 - c0
-    ny = abs(dr)
-    nx = abs(dc)
-    sy = 1 if dr > 0 else -1
-    sx = 1 if dc > 0 else -1
-    r = r0
-    c = c0
-    iy = 0
-    ix = 0
-    while ix < nx or iy < ny:
-        d = (1 + 2 * ix) * ny - (1 + 2 * iy) * nx
-        if d == 0:
-            # through a grid corner: the two side cells touch the segment there
-            if not transparent[r + sy, c] or not transparent[r, c + sx]:
-                return False
-            r += sy
-            c += sx
-            iy += 1
-            ix += 1
-        elif d < 0:
-            c += sx
-            ix += 1
-        else:
-            r += sy
-            iy += 1
-        if r == r1 and c == c1:
-            return True
-        if not transparent[r, c]:
-            return False
-    return True
+from ovon.sim.los import los_clear
 
 
 @nb.njit(cache=True, nogil=True)

@@ -21,7 +21,8 @@ import numpy as np
 import skfmm
 from numba import njit
 
-from ovon.sim.navgrid import NavGrid, SceneNav, _los
+from ovon.sim.los import los_between
+from ovon.sim.navgrid import NavGrid, SceneNav
 
 MAX_SNAP = 0.5  # m: goals farther than this from any navigable cell of the grid are ignored
 _SEED_RADIUS = 3  # cells: window around a goal where the level set is the exact Euclidean distance
@@ -186,7 +187,7 @@ def _shortcut(nav, rr, cc):
     anchor = 0
     i = 1
     while i < n:
-        if not _los(nav, rr[anchor], cc[anchor], rr[i], cc[i]):
+        if not los_between(nav, rr[anchor], cc[anchor], rr[i], cc[i]):
             anchor = i - 1
             keep[m] = anchor
             m += 1

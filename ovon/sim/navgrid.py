@@ -40,6 +40,7 @@ from scipy import ndimage
 
 from ovon.config.sim import AgentConfig, NavConfig
 from ovon.scenes.model import Scene
+from ovon.sim.los import los_between
 
 DEFAULT_MAX_SLOPE_DEG = 30.0  # used when NavConfig has no `max_slope_deg`
 MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
@@ -242,44 +243,6 @@ def _floor_heights(ptr, ys, walk, blocked, lo, hi, climb, free_h, any_h):
                         free_h[cell] = y
 
 
-@njit(cache=True)
-def _los(mask, r0, c0, r1, c1):
-    """Supercover grid traversal between two cell centres; corners need both side cells."""
-    rows, cols = mask.shape
-    if r0 < 0 or c0 < 0 or r1 < 0 or c1 < 0 or r0 >= rows or r1 >= rows or c0 >= cols or c1 >= cols:
-        return False
-    if not mask[r0, c0]:
-        return False
-    dx = c1 - c0
-    dy = r1 - r0
-    nx = abs(dx)
-    ny = abs(dy)
-    sx = 1 if dx > 0 else -1
-    sy = 1 if dy > 0 else -1
-    x = c0
-    y = r0
-    ix = 0
-    iy = 0
-    while ix < nx or iy < ny:
-        dec = (1 + 2 * ix) * ny - (1 + 2 * iy) * nx
-        if dec == 0:
-            if not mask[y, x + sx] or not mask[y + sy, x]:
-                return False
-            x += sx
-            y += sy
-            ix += 1
-            iy += 1
-        elif dec < 0:
-            x += sx
-            ix += 1
-        else:
-            y += sy
-            iy += 1
-        if not mask[y, x]:
-            return False
-    return True
-
-
 # ----------------------------------------------------------------------------------------------
 # data types
 # ----------------------------------------------------------------------------------------------
@@ -396,7 +359,7 @@ class NavGrid:
     def line_of_sight(self, a_rc, b_rc, mask: np.ndarray | None = None) -> bool:
         """Straight segment between two cell centres stays on `mask` (default: navigable)."""
         m = self.navigable if mask is None else mask
-        return bool(_los(m, int(a_rc[0]), int(a_rc[1]), int(b_rc[0]), int(b_rc[1])))
+        return bool(los_between(m, int(a_rc[0]), int(a_rc[1]), int(b_rc[0]), int(b_rc[1])))
 
 
 @dataclass(eq=False)
