@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from ovon.atomic import gzip_bytes, write_json_gz
 from ovon.dataset import (
     DatasetError,
     Episode,
@@ -26,7 +27,6 @@ from ovon.dataset import (
     write_scene_shard,
     write_split_shell,
 )
-from ovon.dataset.atomic import gzip_bytes, write_json_gz
 
 FIXTURE = Path(__file__).parent / "fixtures" / "ovon_release"
 SCENE = "TEEsavR23oF"
@@ -235,7 +235,7 @@ def test_failed_write_leaves_nothing(tmp_path):
 
 
 def test_interrupted_atomic_write_keeps_old_file(tmp_path, monkeypatch):
-    from ovon.dataset import atomic
+    from ovon import atomic
 
     target = tmp_path / "a.json.gz"
     write_json_gz(target, {"episodes": []})

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ovon.atomic import atomic_write_text, write_json_gz
 from ovon.config.base import from_dict, to_dict
 from ovon.config.dataset import GenerationConfig
 from ovon.config.sim import AgentConfig, CameraConfig, NavConfig
-from ovon.dataset.atomic import atomic_write_text, write_json_gz
 from ovon.dataset.io import shard_exists, write_scene_shard, write_split_shell
 from ovon.dataset.records import Episode, ObjectGoal, ViewPoint, goal_key
 from ovon.geometry import yaw_to_quat

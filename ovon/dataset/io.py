@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ovon.dataset.atomic import write_json_gz
+from ovon.atomic import write_json_gz
 from ovon.dataset.records import DatasetError, Episode, ObjectGoal, goal_key
 
 SPLITS: tuple[str, ...] = ("train", "val_seen", "val_seen_synonyms", "val_unseen")

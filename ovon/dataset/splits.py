@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ovon.dataset.atomic import write_json
+from ovon.atomic import write_json
 from ovon.dataset.io import SPLIT_ALIASES
 from ovon.dataset.records import DatasetError
 from ovon.models.text_minilm import MODEL_NAME, TextEncoder

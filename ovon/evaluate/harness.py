@@ -8,10 +8,10 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ovon.atomic import atomic_write_text
 from ovon.config.base import merge, parse_overrides, to_dict
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
-from ovon.dataset.atomic import atomic_write_text
 from ovon.evaluate.results import RecordWriter, paper_table, read_records, record_key, summarize
 from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec

@@ -216,20 +216,18 @@ class ActorCritic(nn.Module):
 
     def save(self, path: str | Path, extra: dict[str, Any] | None = None) -> None:
         """Checkpoint with everything needed to rebuild the module (config + dims + weights)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        torch.save(
-            {
-                "format": CHECKPOINT_FORMAT,
-                "policy_config": to_dict(self.cfg),
-                "encoder_config": None if self.encoder_cfg is None else to_dict(self.encoder_cfg),
-                "image_dim": self.image_dim,
-                "text_dim": self.text_dim,
-                "state_dict": self.state_dict(),
-                "extra": extra or {},
-            },
-            path,
-        )
+        from ovon.atomic import atomic_write_with
+
+        payload = {
+            "format": CHECKPOINT_FORMAT,
+            "policy_config": to_dict(self.cfg),
+            "encoder_config": None if self.encoder_cfg is None else to_dict(self.encoder_cfg),
+            "image_dim": self.image_dim,
+            "text_dim": self.text_dim,
+            "state_dict": self.state_dict(),
+            "extra": extra or {},
+        }
+        atomic_write_with(path, lambda f: torch.save(payload, f))
 
     @classmethod
     def load(cls, path: str | Path, map_location: str | torch.device = "cpu") -> ActorCritic:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from ovon.dataset.atomic import atomic_write_text
+from ovon.atomic import atomic_write_text
 from ovon.reports.compare import load_run, markdown_report
 from ovon.reports.plots import plot_failures, plot_sr_per_category, plot_sr_vs_distance
 

@@ -23,10 +23,8 @@ from __future__ import annotations
 import base64
 import io
 import json
-import os
 import re
 import struct
-import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ovon.atomic import atomic_write_bytes
 from ovon.scenes.model import Mesh, ObjectInstance, Region, Scene
 
 SEMANTIC_HEADER = "HM3D Semantic Annotations"
@@ -54,20 +53,6 @@ class SceneLoadWarning(UserWarning):
 
 
 # --------------------------------------------------------------------------------------------- files
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    """Write via a temp file in the same folder + os.replace, so readers never see half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def _short_id(scene_id: str) -> str:
@@ -475,14 +460,14 @@ def write_scene(scene: Scene, folder: str | Path, meta: dict | None = None) -> P
         SemanticEntry(o.id, palette[o.id], o.raw_label, int(o.region_id))
         for o in sorted(scene.objects, key=lambda o: o.id)
     ]
-    _atomic_write(folder / f"{stem}.glb", visual)
-    _atomic_write(folder / f"{stem}.semantic.glb", semantic)
-    _atomic_write(folder / f"{stem}.semantic.txt", format_semantic_txt(entries).encode())
+    atomic_write_bytes(folder / f"{stem}.glb", visual)
+    atomic_write_bytes(folder / f"{stem}.semantic.glb", semantic)
+    atomic_write_bytes(folder / f"{stem}.semantic.txt", format_semantic_txt(entries).encode())
     side_doc = _sidecar(scene, mode, palette)
     if meta is not None:
         side_doc["meta"] = meta
     side = json.dumps(side_doc, indent=1)
-    _atomic_write(folder / f"{stem}.ovon.json", side.encode())
+    atomic_write_bytes(folder / f"{stem}.ovon.json", side.encode())
     return folder
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import os
 import random
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -44,18 +43,10 @@ def seed_everything(seed: int) -> None:
 
 
 def atomic_torch_save(obj: Any, path: str | Path) -> Path:
-    """`torch.save` to a temp file in the same folder, then `os.replace` (atomic on POSIX)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        torch.save(obj, tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    """`torch.save` through the project's atomic writer (temp file, fsync, rename)."""
+    from ovon.atomic import atomic_write_with
+
+    return atomic_write_with(path, lambda f: torch.save(obj, f))
 
 
 def save_checkpoint(out_dir: str | Path, payload: dict[str, Any]) -> Path:
@@ -81,14 +72,7 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
 def export_policy(policy: torch.nn.Module, out_dir: str | Path, extra: dict[str, Any], update: int, keep: int) -> Path:
     """Write `policy.pt` (atomically) and a numbered snapshot, keeping the newest `keep` snapshots."""
     out_dir = Path(out_dir)
-    fd, tmp = tempfile.mkstemp(prefix=".policy.", suffix=".tmp", dir=out_dir)
-    os.close(fd)
-    try:
-        policy.save(tmp, extra)
-        os.replace(tmp, out_dir / POLICY_NAME)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    policy.save(out_dir / POLICY_NAME, extra)  # atomic (ovon.atomic)
     if keep > 0:
         snaps = out_dir / "snapshots"
         snaps.mkdir(exist_ok=True)
