@@ -29,12 +29,16 @@ def register(sub) -> None:
     v.add_argument("--out", required=True, help="output PNG")
     v.set_defaults(func=cmd_view)
 
-    b = gs.add_parser("bench", help="env steps/s (random moves/turns, auto-reset, RGB+depth+semantic)")
+    b = gs.add_parser("bench", help="env steps/s (random moves and turns, auto-reset; depth, semantic and RGB "
+                                    "unless --no-rgb)")
     b.add_argument("--scene", default="procedural:0")
     b.add_argument("--goal", help="goal category (default: the scene's most frequent floor object)")
     _camera_args(b)
-    b.add_argument("--workers", type=int, default=1, help="1: in this process; N > 1: N worker processes")
-    b.add_argument("--steps", type=int, default=500, help="timed env steps over all workers")
+    b.add_argument("--no-rgb", action="store_true", help="skip the RGB channel (what oracle encoders need)")
+    b.add_argument("--workers", type=int, default=1,
+                   help="worker processes of the vector env; 0: one env stepped in this process")
+    b.add_argument("--envs-per-worker", type=int, default=4, help="envs hosted by each worker process")
+    b.add_argument("--steps", type=int, default=1000, help="timed env steps over all envs")
     b.add_argument("--seed", type=int, default=0)
     b.set_defaults(func=cmd_bench)
 
@@ -123,16 +127,25 @@ def cmd_view(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    import dataclasses
+
     from ovon.config.sim import SimConfig
-    from ovon.sim.vector import measure_throughput, pick_goal
+    from ovon.env.bench import measure_throughput, pick_goal
+    from ovon.env.stack import EnvRecipe
 
     os.environ.setdefault("LP_NUM_THREADS", "0")
-    if args.workers < 1 or args.steps < 1:
-        raise ValueError("--workers and --steps must be >= 1")
+    if args.workers < 0 or args.steps < 1 or args.envs_per_worker < 1:
+        raise ValueError(f"--workers must be >= 0 (got {args.workers}), --steps and --envs-per-worker >= 1 "
+                         f"(got {args.steps}, {args.envs_per_worker})")
     goal = args.goal or pick_goal(args.scene)
-    kwargs = dict(scene=args.scene, goal=goal, sim=SimConfig(camera=_camera(args)), privileged=True)
-    r = measure_throughput(kwargs, workers=args.workers, steps=args.steps, seed=args.seed)
-    print(f"scene {args.scene}, goal {goal!r}, {args.width}x{args.height}, backend {args.backend}, "
-          f"{r['workers']} worker(s): {r['steps']} steps in {r['seconds']:.2f} s (setup {r['setup_s']:.1f} s)")
+    cam = dataclasses.replace(_camera(args), rgb=not args.no_rgb)
+    recipe = EnvRecipe(sim=SimConfig(camera=cam), scene=args.scene, goal=goal)
+    envs = args.envs_per_worker * max(1, args.workers)
+    r = measure_throughput(recipe, workers=args.workers, envs=envs, steps=args.steps, seed=args.seed)
+    where = "in this process" if args.workers == 0 else f"{r['envs']} envs on {r['workers']} worker(s)"
+    channels = "depth+semantic" if args.no_rgb else "rgb+depth+semantic"
+    print(f"scene {args.scene}, goal {goal!r}, {args.width}x{args.height} {channels}, backend {args.backend}, "
+          f"{where}: {r['steps']} steps in {r['seconds']:.2f} s (setup {r['setup_s']:.1f} s, "
+          f"{r['cpu_ms_per_step']:.2f} CPU ms/step)")
     print(f"{r['steps_per_s']:.1f} steps/s")
     return 0
