@@ -15,8 +15,8 @@ from gymnasium.utils.env_checker import check_env
 import ovon  # noqa: F401  (registers the env)
 from ovon.config.sim import NoiseConfig
 from ovon.config.task import TaskConfig
-from ovon.sim.agent import LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.env import ObjectNavEnv, make_objectnav
+from ovon.sim.agent import LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
 from tests.test_env_scene import objects_scene, small_sim
 

@@ -15,9 +15,9 @@ import pytest
 
 from ovon.config.sim import AgentConfig, CameraConfig, SimConfig
 from ovon.config.task import TaskConfig
+from ovon.env import ObjectNavEnv
 from ovon.scenes.model import Mesh, ObjectInstance, Scene
 from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
-from ovon.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec
 from tests.meshes import box, room_boxes
 

@@ -17,10 +17,10 @@ import torch
 torch.set_num_threads(1)
 
 from ovon.train.bc import SHARD_FORMAT  # noqa: E402
-from ovon.train.episodes import adhoc_specs  # noqa: E402
-from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 from ovon.train.config import TrainConfig, train_preset  # noqa: E402
+from ovon.train.episodes import adhoc_specs  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
+from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 GOALS = ["couch", "bed", "toilet", "sink"]
@@ -161,8 +161,8 @@ def test_bc_overfits_recorded_expert_episodes(tmp_path: Path, house_specs, table
 # ----- DAgger / PPO end to end + the policy agent -----------------------------------------------------
 def test_dagger_then_ppo_finetune_then_agent(tmp_path: Path, house_specs, table_path: str) -> None:
     from ovon.agents import make_agent
-    from ovon.evaluate.runner import run_episode
     from ovon.env import make_objectnav
+    from ovon.evaluate.runner import run_episode
     from ovon.train import train
 
     cfg = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table_path)
@@ -374,8 +374,8 @@ def test_expert_embodiment_follows_the_sim_and_task_config() -> None:
 def test_inner_viewpoints_keep_those_close_to_a_goal_box() -> None:
     from types import SimpleNamespace
 
-    from ovon.task.episode import GoalViewpoint
     from ovon.env.labels import inner_viewpoints
+    from ovon.task.episode import GoalViewpoint
 
     box = SimpleNamespace(id=7, aabb_min=np.array([0.0, 0.0, 0.0]), aabb_max=np.array([1.0, 1.0, 1.0]))
     other = SimpleNamespace(id=8, aabb_min=np.array([5.0, 0.0, 5.0]), aabb_max=np.array([6.0, 1.0, 6.0]))
@@ -395,8 +395,8 @@ def test_cpu_small_features_end_to_end(tmp_path: Path, house_specs, table_path: 
     collision flag from the worker's encoder, no previous-action input, the inner-viewpoint frontier
     expert with a STOP weight; then a fine-tune that trains the (absent) prev-action group, and the agent."""
     from ovon.agents import make_agent
-    from ovon.evaluate.runner import run_episode
     from ovon.env import make_objectnav
+    from ovon.evaluate.runner import run_episode
     from ovon.experts.config import FrontierExpertConfig
     from ovon.train import train
 
