@@ -39,7 +39,7 @@ def test_roof_is_not_a_floor_without_hints():
     assert len(nav.floors) == 1 and nav.floors[0].height == pytest.approx(0.0)
 
 
-@pytest.mark.parametrize("width,islands", [(0.30, 2), (0.40, 1), (0.90, 1)])
+@pytest.mark.parametrize("width,islands", [(0.30, 2), (0.40, 2), (0.45, 2), (0.50, 1), (0.90, 1)])
 def test_doorway_width(width, islands):
     boxes = room_boxes(0, 0, 10, 4) + wall_x_with_gap(5.0, 0, 4, 1.5, 1.5 + width)
     g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
