@@ -20,8 +20,9 @@ def face_normals_areas(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
 
 def detect_floors(mesh: Mesh, bin_size: float = 0.1, min_area: float = 2.0) -> list[float]:
     """Floor heights (ascending; empty when there is no upward horizontal face) from large upward-facing
-    horizontal triangles: an area-weighted height histogram,
-    peaks taken greedily by area, each at least FLOOR_SEPARATION from the ones already taken."""
+    horizontal triangles: an area-weighted height histogram, peaks taken greedily by area, each at least
+    FLOOR_SEPARATION from the ones already taken. A peak with nothing above most of it is a roof, not a
+    floor (unless no peak has a ceiling: an open scan)."""
     if mesh.num_faces == 0:
         return []
     n, area = face_normals_areas(mesh.vertices, mesh.faces)
@@ -50,7 +51,37 @@ def detect_floors(mesh: Mesh, bin_size: float = 0.1, min_area: float = 2.0) -> l
             chosen.append(h)
     if not chosen:
         chosen = [float(y[np.argmax(w)])]
-    return sorted(chosen)
+    faces_up = mesh.faces[up]
+    covered = [h for h in chosen if _covered_fraction(mesh, faces_up[np.abs(y - h) <= bin_size], h) >= 0.5]
+    return sorted(covered or [min(chosen)])
+
+
+def _covered_fraction(mesh: Mesh, faces: np.ndarray, h: float, cell: float = 0.5, samples: int = 50_000) -> float:
+    """Share of the area of `faces` (a floor candidate at height h) with mesh surface more than 1 m above
+    it, from area-uniform surface samples binned on an xz grid (deterministic)."""
+    rng = np.random.default_rng(0)
+
+    def sample(f: np.ndarray, k: int) -> np.ndarray:
+        v = mesh.vertices.astype(np.float64)
+        a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+        ar = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        if ar.sum() <= 0:
+            return np.zeros((0, 3))
+        idx = rng.choice(len(f), size=k, p=ar / ar.sum())
+        r1, r2 = rng.random(k), rng.random(k)
+        flip = r1 + r2 > 1
+        r1[flip], r2[flip] = 1 - r1[flip], 1 - r2[flip]
+        return a[idx] + r1[:, None] * (b[idx] - a[idx]) + r2[:, None] * (c[idx] - a[idx])
+
+    everywhere = sample(mesh.faces, samples)
+    floor = sample(faces, 2000)
+    if len(floor) == 0:
+        return 0.0
+    above = everywhere[everywhere[:, 1] > h + 1.0]
+    if len(above) == 0:
+        return 0.0
+    key = lambda p: (np.floor(p[:, 0] / cell).astype(np.int64) << 32) + np.floor(p[:, 2] / cell).astype(np.int64)  # noqa: E731
+    return float(np.isin(key(floor), np.unique(key(above))).mean())
 
 
 def _hull_2d(pts: np.ndarray) -> np.ndarray:

@@ -112,7 +112,7 @@ def rotation_warning(mesh: Mesh) -> str | None:
     n = cr / np.maximum(2 * area, 1e-12)[:, None]
     flat = [float(area[np.abs(n[:, k]) > FLAT_COS].sum()) for k in range(3)]
     axis = int(np.argmax(flat))
-    if axis != 1 and flat[axis] > 1.5 * flat[1]:
+    if axis != 1 and flat[axis] > 1.2 * flat[1]:
         name = "xyz"[axis]
         return (f"most flat area faces the {name} axis ({flat[axis]:.0f} m² vs {flat[1]:.0f} m² facing y): the scene "
                 f"looks rotated; if its up axis is {name}, pass --up {name} (or up=\"{name}\"), or add a "
