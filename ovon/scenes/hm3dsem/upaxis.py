@@ -97,8 +97,9 @@ def rotation_warning(mesh: Mesh) -> str | None:
     """Why the mesh looks rotated in habitat's frame (None when it looks upright).
 
     Indoor scenes have more flat area facing up/down (floors, ceilings, table tops) than along any
-    horizontal axis, and their upward-facing floors sit low. A scene lying on its side has most of its
-    flat area facing x or z; one upside down has its largest upward-facing area near the top.
+    horizontal axis: a scene lying on its side has most of its flat area facing x or z. A scene whose
+    horizontal faces all point down is upside down (or has inverted winding). Long corridors can have
+    more wall than floor area: this is a warning, never a silent change.
     """
     if mesh.num_faces == 0:
         return None
@@ -117,18 +118,7 @@ def rotation_warning(mesh: Mesh) -> str | None:
         return (f"most flat area faces the {name} axis ({flat[axis]:.0f} m² vs {flat[1]:.0f} m² facing y): the scene "
                 f"looks rotated; if its up axis is {name}, pass --up {name} (or up=\"{name}\"), or add a "
                 "<id>.stage_config.json with \"up\"")
-    up = n[:, 1] > FLAT_COS
-    if up.any():
-        ys = v[f[up]].mean(axis=1)[:, 1]
-        lo, hi = float(v[:, 1].min()), float(v[:, 1].max())
-        # area-weighted height histogram of upward faces: its heaviest bin should be in the lower half
-        bins = np.clip(((ys - lo) / max(hi - lo, 1e-9) * 10).astype(int), 0, 9)
-        heaviest = int(np.argmax(np.bincount(bins, weights=area[up], minlength=10)))
-        down = n[:, 1] < -FLAT_COS
-        if heaviest >= 5 and hi - lo > 1.0 and area[down].sum() > area[up].sum():
-            return ("the largest upward-facing area is near the top and more flat area faces down than up: the "
-                    "scene looks upside down; pass --up -y (or fix the asset's up axis)")
-    elif flat[1] > 0:
+    if not (n[:, 1] > FLAT_COS).any() and flat[1] > 0:
         return ("no horizontal face points up (all face down): the scene looks upside down or has inverted "
                 "winding; pass --up -y if it is upside down")
     return None
