@@ -313,3 +313,14 @@ def test_cli_prints_one_line(tmp_path: Path, capsys) -> None:
     assert main(["scenes", "inspect", str(p)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "t.glb" in err and "Traceback" not in err
+
+
+def test_objectnav_env_on_a_bare_mesh_says_what_is_missing(tmp_path: Path) -> None:
+    from ovon.scenes.hm3dsem import load_scene as load
+    from ovon.task.episode import EpisodeSpec
+    from ovon.task.goals import goal_instances
+
+    write_glb(_room_mesh(), tmp_path / "room.glb")
+    scene = load(tmp_path / "room.glb")
+    with pytest.raises(ValueError, match=r"ObjectNav goals \('bed'\) need semantic annotations.*room.semantic.txt"):
+        goal_instances(scene, EpisodeSpec("0", str(tmp_path / "room.glb"), "bed"))
