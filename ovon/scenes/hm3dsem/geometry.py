@@ -21,8 +21,8 @@ def face_normals_areas(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
 def detect_floors(mesh: Mesh, bin_size: float = 0.1, min_area: float = 2.0) -> list[float]:
     """Floor heights (ascending; empty when there is no upward horizontal face) from large upward-facing
     horizontal triangles: an area-weighted height histogram, peaks taken greedily by area, each at least
-    FLOOR_SEPARATION from the ones already taken. A peak with nothing above most of it is a roof, not a
-    floor (unless no peak has a ceiling: an open scan)."""
+    FLOOR_SEPARATION from the ones already taken. A peak at the very top of the mesh with nothing above
+    most of it is a roof, not a floor (unless no peak remains: an open scan)."""
     if mesh.num_faces == 0:
         return []
     n, area = face_normals_areas(mesh.vertices, mesh.faces)
@@ -52,8 +52,10 @@ def detect_floors(mesh: Mesh, bin_size: float = 0.1, min_area: float = 2.0) -> l
     if not chosen:
         chosen = [float(y[np.argmax(w)])]
     faces_up = mesh.faces[up]
-    covered = [h for h in chosen if _covered_fraction(mesh, faces_up[np.abs(y - h) <= bin_size], h) >= 0.5]
-    return sorted(covered or [min(chosen)])
+    top = float(mesh.vertices[:, 1].max())
+    kept = [h for h in chosen
+            if top - h > 0.5 or _covered_fraction(mesh, faces_up[np.abs(y - h) <= bin_size], h) >= 0.5]
+    return sorted(kept or [min(chosen)])
 
 
 def _covered_fraction(mesh: Mesh, faces: np.ndarray, h: float, cell: float = 0.5, samples: int = 50_000) -> float:
