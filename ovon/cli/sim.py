@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +22,12 @@ def register(sub) -> None:
     gs = g.add_subparsers(dest="sim_command", required=True)
 
     v = gs.add_parser("view", help="render RGB | depth | semantic at a pose into one PNG")
-    v.add_argument("scene", help="scene folder/file (HM3DSem layout) or procedural:<seed>")
+    v.add_argument("scene", help="scene folder/file (HM3DSem layout, or a bare .glb/.gltf/.ply/.obj) or "
+                                 "procedural:<seed>")
+    # "-3,0,2,90" is a value, not an option: let the pose start with a minus sign
+    v._negative_number_matcher = re.compile(r"^-\d[\d.,eE+-]*$")
     v.add_argument("--pose", help="x,y,z,yaw_deg of the agent's feet (default: a random navigable pose)")
+    v.add_argument("--up", default=None, metavar="AXIS", help="up axis of a scan / bare mesh (y, z, -z, ...)")
     v.add_argument("--pitch", type=float, default=0.0, help="camera pitch in degrees, > 0 looks up")
     v.add_argument("--seed", type=int, default=0, help="seed of the random pose")
     _camera_args(v)
@@ -93,7 +98,7 @@ def cmd_view(args) -> int:
     from ovon.sim.world import load_scene_any
 
     cam = _camera(args)
-    scene = load_scene_any(args.scene)
+    scene = load_scene_any(args.scene, up=args.up)
     if args.pose:
         pos, yaw = _parse_pose(args.pose)
     else:
@@ -104,7 +109,8 @@ def cmd_view(args) -> int:
         rng = np.random.default_rng(args.seed)
         grids = [g for g in nav.floors if g.navigable.any()]
         if not grids:
-            raise ValueError(f"scene {args.scene!r} has no navigable area for a random pose")
+            raise ValueError(f"scene {args.scene!r} has no navigable area for a random pose; pass --pose x,y,z,yaw "
+                             "(or --up if the scene is rotated)")
         pos = grids[int(rng.integers(len(grids)))].random_point(rng)
         yaw = float(rng.uniform(-math.pi, math.pi))
     renderer = make_renderer(scene, cam)
