@@ -11,12 +11,22 @@ projection flips y, so the bottom-up GL read-back comes out with row 0 at the to
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
 from ovon.config.sim import CameraConfig
 from ovon.scenes.model import Mesh, Scene
 from ovon.sim.render import camera as cam
+from ovon.sim.render.cull import (
+    Chunks,
+    build_chunks,
+    faces_in,
+    frustum_mask,
+    nearest_chunks,
+    occlusion_mask,
+    visible_faces,
+)
 from ovon.sim.render.texture import (
     SemanticSource,
     VisualSource,
@@ -25,6 +35,10 @@ from ovon.sim.render.texture import (
     visual_source,
 )
 from ovon.sim.types import Frame
+
+GUESS_FACES = 4096  # faces of the nearest frustum chunks drawn in a frame's first guess (besides last frame's)
+GUESS_GROWTH = 4.0  # needed faces above this many times the guess's: grow the guess instead of drawing them
+SEMANTIC_GUESS_MARGIN_M = 0.05  # semantic chunks this far behind the visual depth are left out of the guess
 
 _CTX = None  # one shared context per process (creating one costs ~0.3 s)
 _CTX_PID = -1
@@ -62,7 +76,7 @@ out vec3 v_col;
 in int in_id;
 flat out int v_id;
 #endif
-#ifdef SEM_TEX
+#if defined(SEM_TEX) && !defined(SEM_UV_IS_UV)
 in vec2 in_suv;
 out vec2 v_suv;
 #endif
@@ -80,7 +94,7 @@ void main() {
 #ifdef SEM_FACE
     v_id = in_id;
 #endif
-#ifdef SEM_TEX
+#if defined(SEM_TEX) && !defined(SEM_UV_IS_UV)
     v_suv = in_suv;
 #endif
 }
@@ -102,7 +116,11 @@ flat in int v_id;
 #endif
 #ifdef SEM_TEX
 uniform isampler2D u_ids;
+#ifdef SEM_UV_IS_UV
+#define v_suv v_uv
+#else
 in vec2 v_suv;
+#endif
 #endif
 #if defined(VISUAL) && (defined(VIS_TEX) || defined(VIS_COL))
 layout(location = 0) out vec4 f_color;
@@ -147,17 +165,32 @@ def _src(defines: list[str], body: str) -> str:
     return head + "\n" + "".join(f"#define {d}\n" for d in defines) + rest
 
 
-class GLRenderer:
-    """Renderer protocol on moderngl; one draw call per pass, buffers reused across frames."""
+@dataclass
+class _Pass:
+    """One draw pass: its program, geometry (de-indexed, original face order), textures and culling state."""
 
-    def __init__(self, scene: Scene, camera: CameraConfig) -> None:
+    prog: object  # moderngl.Program
+    vao: object  # draws every face, in order
+    vao_subset: object | None  # draws the faces listed in `ibo` (culling)
+    ibo: object | None
+    textures: list
+    chunks: Chunks | None
+    visible: np.ndarray  # (N,) bool: chunks found visible in the last frame (the next frame's first guess)
+
+
+class GLRenderer:
+    """Renderer protocol on moderngl; buffers reused across frames, chunks culled per frame (`cull.py`)."""
+
+    def __init__(self, scene: Scene, camera: CameraConfig, cull: bool | None = None) -> None:
         self.width = int(camera.width)
         self.height = int(camera.height)
         self.hfov_deg = float(camera.hfov_deg)
+        self.cull = bool(getattr(camera, "cull", True)) if cull is None else bool(cull)
         self.ctx = gl_context()
         ctx = self.ctx
         self._res: list = []  # GL objects to release on close
         self._proj = cam.projection_matrix(self.width, self.height, self.hfov_deg)
+        self._focal = cam.focal_length(self.width, self.height, self.hfov_deg)
         size = (self.width, self.height)
 
         # Without RGB (camera.rgb = False: no consumer reads it) the colour attribute, texture lookup,
@@ -170,7 +203,9 @@ class GLRenderer:
         vis_defines = ["VISUAL"] + ([] if vis is None else ["VIS_TEX" if vis.mode == "texture" else "VIS_COL"])
         if not self._separate:
             vis_defines.append(sem_define)  # same triangles: ids in the same single pass
-        self._vis_prog, self._vis_vao, self._vis_tex = self._build(scene.mesh, vis_defines, vis, sem)
+            if sem.mode == "texture" and vis is not None and vis.mode == "texture" and _same(sem.uvs, vis.uvs):
+                vis_defines.append("SEM_UV_IS_UV")  # one interpolated uv for both lookups (cheaper setup)
+        self._vis = self._build(scene.mesh, vis_defines, vis, sem)
 
         self._zlin = self._keep(ctx.renderbuffer(size, components=1, dtype="f4"))
         self._ids = self._keep(ctx.renderbuffer(size, components=1, dtype="i4"))
@@ -181,21 +216,22 @@ class GLRenderer:
         self._fbo = self._keep(
             ctx.framebuffer(color_attachments=attach, depth_attachment=self._keep(ctx.depth_renderbuffer(size)))
         )
+        self._sem: _Pass | None = None
         if self._separate:
-            sem_mesh = scene.semantic_source
-            self._sem_prog, self._sem_vao, self._sem_tex = self._build(sem_mesh, [sem_define], None, sem)
+            self._sem = self._build(scene.semantic_source, [sem_define], None, sem)
             self._sem_fbo = self._keep(
                 ctx.framebuffer(
                     color_attachments=[self._ids], depth_attachment=self._keep(ctx.depth_renderbuffer(size))
                 )
             )
+            self._sem_z = np.empty((self.height, self.width), np.float32)
 
     def _keep(self, obj):  # noqa: ANN001, ANN202
         self._res.append(obj)
         return obj
 
-    def _build(self, mesh: Mesh, defines: list[str], vis: VisualSource | None, sem: SemanticSource):  # noqa: ANN202
-        """Compile the program variant and upload the de-indexed mesh with its attributes."""
+    def _build(self, mesh: Mesh, defines: list[str], vis: VisualSource | None, sem: SemanticSource) -> _Pass:
+        """Compile the program variant, upload the de-indexed mesh with its attributes, chunk it for culling."""
         ctx = self.ctx
         prog = self._keep(ctx.program(vertex_shader=_src(defines, _VERT), fragment_shader=_src(defines, _FRAG)))
         corners = mesh.faces.reshape(-1)
@@ -221,7 +257,7 @@ class GLRenderer:
                 content.append((col.astype("f4"), "3f", "in_col"))
         if "SEM_FACE" in defines:
             content.append((np.repeat(sem.face_ids.astype("i4"), 3), "i", "in_id"))
-        if "SEM_TEX" in defines:
+        if "SEM_TEX" in defines and "SEM_UV_IS_UV" not in defines:
             content.append((sem.uvs[corners].astype("f4"), "2f", "in_suv"))
             h, w = sem.id_texture.shape
             tex = self._keep(ctx.texture((w, h), 1, sem.id_texture.astype("i4").tobytes(), dtype="i4"))
@@ -236,48 +272,129 @@ class GLRenderer:
         vao = self._keep(ctx.vertex_array(prog, vao_content))
         for unit, (name, _tex) in enumerate(textures):
             prog[name].value = unit
-        return prog, vao, [t for _, t in textures]
+        chunks, vao_subset, ibo = None, None, None
+        if self.cull:
+            chunks = build_chunks(mesh.vertices, mesh.faces)
+            ibo = self._keep(ctx.buffer(reserve=max(12 * mesh.num_faces, 4), dynamic=True))
+            vao_subset = self._keep(ctx.vertex_array(prog, vao_content, index_buffer=ibo, index_element_size=4))
+        visible = np.zeros(0 if chunks is None else len(chunks), np.bool_)
+        return _Pass(prog, vao, vao_subset, ibo, [t for _, t in textures], chunks, visible)
 
     def render(self, eye: np.ndarray, yaw: float, pitch: float) -> Frame:
         """Draw the visual mesh (and the semantic mesh when separate) and read the attachments back."""
         ctx = self.ctx
         view = cam.view_matrix(eye, yaw, pitch)
-        mvp = (self._proj @ view).astype("f4").T.tobytes()  # GL wants column-major
+        clip = self._proj @ view
+        mvp = clip.astype("f4").T.tobytes()  # GL wants column-major
         view_b = view.astype("f4").T.tobytes()
         ctx.disable(ctx.CULL_FACE)
         ctx.enable(ctx.DEPTH_TEST)
-
-        self._fbo.use()
-        self._fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        self._vis_prog["u_mvp"].write(mvp)
-        self._vis_prog["u_view"].write(view_b)
-        for unit, tex in enumerate(self._vis_tex):
-            tex.use(unit)
-        self._vis_vao.render()
-        if self._separate:
-            self._sem_fbo.use()
-            self._sem_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self._sem_prog["u_mvp"].write(mvp)
-            self._sem_prog["u_view"].write(view_b)
-            for unit, tex in enumerate(self._sem_tex):
-                tex.use(unit)
-            self._sem_vao.render()
-
         h, w = self.height, self.width
+        depth = np.empty((h, w), np.float32)
+        first = 1 if self.rgb else 0
+
+        def read_depth() -> np.ndarray:
+            self._fbo.read_into(depth, components=1, attachment=first, dtype="f4")
+            return depth
+
+        if not self._draw_culled(self._vis, self._fbo, mvp, view_b, eye, clip, view, read_depth, None):
+            read_depth()  # the last draw was not read back yet
+        if self._sem is not None:
+
+            def read_sem_depth() -> np.ndarray:
+                # the depth buffer holds z / FAR (see _FRAG); cleared pixels (1.0) become inf
+                self._sem_fbo.read_into(self._sem_z, components=1, attachment=-1, dtype="f4")
+                z = self._sem_z
+                np.multiply(z, np.float32(cam.FAR), out=z)
+                z[z >= np.float32(cam.FAR)] = np.inf
+                return z
+
+            self._draw_culled(self._sem, self._sem_fbo, mvp, view_b, eye, clip, view, read_sem_depth, depth)
+
         rgb = None
-        first = 0
         if self.rgb:
             rgb = np.empty((h, w, 3), np.uint8)
             self._fbo.read_into(rgb, components=3, attachment=0, dtype="f1")
-            first = 1
-        depth = np.empty((h, w), np.float32)
         sem = np.empty((h, w), np.int32)
-        self._fbo.read_into(depth, components=1, attachment=first, dtype="f4")
         sem_fbo = self._sem_fbo if self._separate else self._fbo
         sem_fbo.read_into(sem, components=1, attachment=0 if self._separate else first + 1, dtype="i4")
         return Frame(rgb=rgb, depth=depth, semantic=sem)
+
+    def _draw_culled(self, p: _Pass, fbo, mvp: bytes, view_b: bytes, eye, clip, view, read_depth, guess_depth) -> bool:  # noqa: ANN001, E501
+        """Draw pass `p` exactly as if every face were drawn, drawing only chunks that can be visible; True
+        when `read_depth` has read the final draw.
+
+        A first guess is drawn -- the chunks visible last frame plus the nearest ones in the frustum (or, for a
+        separate semantic mesh, those not hidden behind the visual depth) -- and every frustum chunk that its
+        depth does not hide is `needed` (see `cull.py`). When the guess missed some, the needed chunks are
+        drawn instead; a guess that left most of the view open (a cold start) first grows by the nearest
+        missing chunks, with a doubling budget, so that far rooms seen through its holes are not all drawn."""
+        p.prog["u_mvp"].write(mvp)
+        p.prog["u_view"].write(view_b)
+        for unit, tex in enumerate(p.textures):
+            tex.use(unit)
+        if p.chunks is None:
+            self._draw(p, fbo, None)
+            return False
+        ch = p.chunks
+        infrustum = frustum_mask(ch, clip)
+        if faces_in(ch, infrustum) <= GUESS_FACES:  # few faces: culling more would cost more than it saves
+            self._draw(p, fbo, infrustum)
+            p.visible = infrustum
+            return False
+        known = infrustum & p.visible
+        if guess_depth is None:
+            guess = known | nearest_chunks(ch, infrustum & ~known, eye, GUESS_FACES)
+        else:
+            guess = known | occlusion_mask(
+                ch, infrustum, guess_depth, view, self._focal, cam.NEAR, SEMANTIC_GUESS_MARGIN_M
+            )
+        budget = GUESS_FACES
+        while True:
+            self._draw(p, fbo, guess)
+            needed = occlusion_mask(ch, infrustum, read_depth(), view, self._focal, cam.NEAR)
+            missing = needed & ~guess
+            if not missing.any():
+                break
+            if faces_in(ch, needed) <= GUESS_GROWTH * faces_in(ch, guess):
+                self._draw(p, fbo, needed)
+                needed = occlusion_mask(ch, needed, read_depth(), view, self._focal, cam.NEAR)
+                break
+            budget *= 2
+            guess = (guess & needed) | nearest_chunks(ch, missing, eye, budget)
+        p.visible = needed
+        return True
+
+    def _draw(self, p: _Pass, fbo, mask: np.ndarray | None) -> None:  # noqa: ANN001
+        """Clear `fbo` and draw the faces of the chunks in `mask` (all faces when None), in mesh order."""
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        if mask is None or p.chunks is None:
+            p.vao.render()
+            return
+        faces = visible_faces(p.chunks, mask)
+        if len(faces) == p.chunks.num_faces:
+            p.vao.render()
+        elif len(faces):
+            idx = _corner_indices(faces)
+            p.ibo.write(idx)
+            p.vao_subset.render(vertices=len(idx))
 
     def close(self) -> None:
         for obj in reversed(self._res):
             obj.release()
         self._res.clear()
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    return a is not None and b is not None and a.shape == b.shape and bool(np.array_equal(a, b))
+
+
+def _corner_indices(faces: np.ndarray) -> np.ndarray:
+    """Vertex ids of the de-indexed buffer (3 per face) for `faces`, in order."""
+    idx = np.empty((len(faces), 3), np.int32)
+    base = faces * 3
+    idx[:, 0] = base
+    idx[:, 1] = base + 1
+    idx[:, 2] = base + 2
+    return idx.reshape(-1)

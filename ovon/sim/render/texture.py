@@ -61,7 +61,10 @@ def semantic_source(mesh: Mesh, semantic_colors: dict[int, tuple[int, int, int]]
     if mesh.face_instance is not None:
         return SemanticSource("face", face_ids=mesh.face_instance.astype(np.int32))
     if mesh.uvs is not None and mesh.texture is not None:
-        ids = colors_to_ids(_rgb(mesh.texture), semantic_colors)
+        ids = colors_to_ids(_rgb(mesh.texture), semantic_colors) if semantic_colors else None
+        if ids is None or (ids == ids.flat[0]).all():  # one id everywhere (e.g. no annotations): no lookups
+            value = 0 if ids is None else int(ids.flat[0])
+            return SemanticSource("face", face_ids=np.full(mesh.num_faces, value, dtype=np.int32))
         return SemanticSource("texture", uvs=mesh.uvs.astype(np.float32), id_texture=ids)
     if mesh.face_colors is not None:
         return SemanticSource("face", face_ids=colors_to_ids(_rgb(mesh.face_colors), semantic_colors))
