@@ -172,7 +172,7 @@ def test_gl_embree_agree(scene: Scene, size: tuple[int, int]) -> None:
     e.close()
 
 
-def _textured_quad_scene(semantic: bool) -> Scene:
+def _textured_quad_scene(semantic: bool, separate: bool = True) -> Scene:
     """A 2 x 2 m quad on the wall z = -2 (x, y in [-1, 1]) with glTF UVs (0, 0) top-left."""
     verts = np.array([[-1, -1, -2], [1, -1, -2], [1, 1, -2], [-1, 1, -2]], np.float32)
     uvs = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
@@ -180,17 +180,20 @@ def _textured_quad_scene(semantic: bool) -> Scene:
     # row 0 = top: top-left red, top-right green, bottom-left blue, bottom-right white
     tex = np.array([[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [255, 255, 255]]], np.uint8)
     vis = Mesh(vertices=verts, faces=faces, uvs=uvs, texture=tex)
+    colors = {7: (255, 0, 0), 8: (0, 255, 0), 9: (0, 0, 255)}  # white is unknown -> 0
     if not semantic:
         return Scene(scene_id="tex", mesh=vis)
+    if not separate:  # ids from the visual texture's colours: one pass, one interpolated uv for both lookups
+        return Scene(scene_id="tex", mesh=vis, semantic_colors=colors)
     # the other diagonal: different triangles, so the backends take their second-pass path
     sem = Mesh(vertices=verts, faces=np.array([[0, 1, 3], [1, 2, 3]], np.int32), uvs=uvs, texture=tex)
-    colors = {7: (255, 0, 0), 8: (0, 255, 0), 9: (0, 0, 255)}  # white is unknown -> 0
     return Scene(scene_id="tex", mesh=vis, semantic_mesh=sem, semantic_colors=colors)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_texture_quadrants(backend: str) -> None:
-    sc = _textured_quad_scene(semantic=True)
+@pytest.mark.parametrize("separate", [True, False], ids=["semantic-mesh", "visual-texture-ids"])
+def test_texture_quadrants(backend: str, separate: bool) -> None:
+    sc = _textured_quad_scene(semantic=True, separate=separate)
     r = make_renderer(sc, camera(100, 100, 90.0), backend)
     f = r.render(np.zeros(3), 0.0, 0.0)  # the quad fills the middle half of the image
     r.close()
@@ -278,3 +281,17 @@ def test_camera_helpers() -> None:
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0)
     assert d[0, 1] > 0 and d[0, 0] < 0 and d[-1, 1] < 0 and d[-1, 0] > 0  # row 0 top, col 0 left
     np.testing.assert_allclose(z, -d[:, 2])
+
+
+def test_constant_id_texture_needs_no_lookup() -> None:
+    """A textured mesh whose colours map to one id (or with no annotations) gets per-face ids, not a texture."""
+    from ovon.sim.render.texture import semantic_source
+
+    vis = _textured_quad_scene(semantic=False).mesh
+    src = semantic_source(vis, {})
+    assert src.mode == "face" and (src.face_ids == 0).all()
+    src = semantic_source(vis, {7: tuple(int(c) for c in vis.texture[0, 0])})  # colours -> {7 (top-left), 0}
+    assert src.mode == "texture"
+    one = Mesh(vertices=vis.vertices, faces=vis.faces, uvs=vis.uvs, texture=np.full((2, 2, 3), 9, np.uint8))
+    src = semantic_source(one, {5: (9, 9, 9)})
+    assert src.mode == "face" and (src.face_ids == 5).all()

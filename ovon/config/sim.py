@@ -33,6 +33,9 @@ class CameraConfig:
     # Render the RGB channel. Off when no consumer reads it (oracle encoders need depth + semantic):
     # saves the colour pass and its read-back. Depth and the semantic frame are always rendered.
     rgb: bool = True
+    # GL only: draw only the mesh chunks that can be visible (frustum + depth-buffer occlusion tests). Exact:
+    # frames are bitwise identical either way; off is the reference path (tests, benchmarks).
+    cull: bool = True
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,8 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
+import cv2
+import moderngl
 import numpy as np
 
 from ovon.config.sim import CameraConfig
@@ -44,14 +46,12 @@ _CTX = None  # one shared context per process (creating one costs ~0.3 s)
 _CTX_PID = -1
 
 
-def gl_context():  # noqa: ANN201  (moderngl.Context; import is lazy)
+def gl_context() -> moderngl.Context:
     """The process's shared standalone EGL context, created on first use (and again after a fork)."""
     global _CTX, _CTX_PID
     if _CTX is None or _CTX_PID != os.getpid():
         # llvmpipe reads this at start-up; 0 (render on the calling thread) measured fastest on 2 cores
         os.environ.setdefault("LP_NUM_THREADS", "0")
-        import moderngl
-
         _CTX = moderngl.create_standalone_context(backend="egl")
         _CTX_PID = os.getpid()
     return _CTX
@@ -175,20 +175,22 @@ class _Pass:
     ibo: object | None
     textures: list
     chunks: Chunks | None
+    num_faces: int
     visible: np.ndarray  # (N,) bool: chunks found visible in the last frame (the next frame's first guess)
 
 
 class GLRenderer:
     """Renderer protocol on moderngl; buffers reused across frames, chunks culled per frame (`cull.py`)."""
 
-    def __init__(self, scene: Scene, camera: CameraConfig, cull: bool | None = None) -> None:
+    def __init__(self, scene: Scene, camera: CameraConfig) -> None:
         self.width = int(camera.width)
         self.height = int(camera.height)
         self.hfov_deg = float(camera.hfov_deg)
-        self.cull = bool(getattr(camera, "cull", True)) if cull is None else bool(cull)
+        self.cull = bool(getattr(camera, "cull", True))
         self.ctx = gl_context()
         ctx = self.ctx
         self._res: list = []  # GL objects to release on close
+        self.faces_drawn = 0  # faces rasterised by the last render (all passes and draws): what culling saves
         self._proj = cam.projection_matrix(self.width, self.height, self.hfov_deg)
         self._focal = cam.focal_length(self.width, self.height, self.hfov_deg)
         size = (self.width, self.height)
@@ -212,6 +214,7 @@ class GLRenderer:
         attach = [self._zlin] + ([] if self._separate else [self._ids])
         if self.rgb:
             self._color = self._keep(ctx.renderbuffer(size, components=4, dtype="f1"))
+            self._rgba = np.empty((self.height, self.width, 4), np.uint8)
             attach.insert(0, self._color)
         self._fbo = self._keep(
             ctx.framebuffer(color_attachments=attach, depth_attachment=self._keep(ctx.depth_renderbuffer(size)))
@@ -244,8 +247,6 @@ class GLRenderer:
                 h, w = vis.texture.shape[:2]
                 tex = self._keep(ctx.texture((w, h), 3, vis.texture.tobytes(), alignment=1))
                 tex.repeat_x = tex.repeat_y = True
-                import moderngl
-
                 tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
                 textures.append(("u_tex", tex))
             else:
@@ -257,12 +258,11 @@ class GLRenderer:
                 content.append((col.astype("f4"), "3f", "in_col"))
         if "SEM_FACE" in defines:
             content.append((np.repeat(sem.face_ids.astype("i4"), 3), "i", "in_id"))
-        if "SEM_TEX" in defines and "SEM_UV_IS_UV" not in defines:
-            content.append((sem.uvs[corners].astype("f4"), "2f", "in_suv"))
+        if "SEM_TEX" in defines:
+            if "SEM_UV_IS_UV" not in defines:
+                content.append((sem.uvs[corners].astype("f4"), "2f", "in_suv"))
             h, w = sem.id_texture.shape
             tex = self._keep(ctx.texture((w, h), 1, sem.id_texture.astype("i4").tobytes(), dtype="i4"))
-            import moderngl
-
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             textures.append(("u_ids", tex))
         vao_content = []
@@ -278,7 +278,7 @@ class GLRenderer:
             ibo = self._keep(ctx.buffer(reserve=max(12 * mesh.num_faces, 4), dynamic=True))
             vao_subset = self._keep(ctx.vertex_array(prog, vao_content, index_buffer=ibo, index_element_size=4))
         visible = np.zeros(0 if chunks is None else len(chunks), np.bool_)
-        return _Pass(prog, vao, vao_subset, ibo, [t for _, t in textures], chunks, visible)
+        return _Pass(prog, vao, vao_subset, ibo, [t for _, t in textures], chunks, mesh.num_faces, visible)
 
     def render(self, eye: np.ndarray, yaw: float, pitch: float) -> Frame:
         """Draw the visual mesh (and the semantic mesh when separate) and read the attachments back."""
@@ -292,6 +292,7 @@ class GLRenderer:
         h, w = self.height, self.width
         depth = np.empty((h, w), np.float32)
         first = 1 if self.rgb else 0
+        self.faces_drawn = 0
 
         def read_depth() -> np.ndarray:
             self._fbo.read_into(depth, components=1, attachment=first, dtype="f4")
@@ -313,8 +314,9 @@ class GLRenderer:
 
         rgb = None
         if self.rgb:
-            rgb = np.empty((h, w, 3), np.uint8)
-            self._fbo.read_into(rgb, components=3, attachment=0, dtype="f1")
+            # reading RGBA is a copy, reading RGB a per-pixel conversion in Mesa (10x slower); cv2 drops alpha
+            self._fbo.read_into(self._rgba, components=4, attachment=0, dtype="f1")
+            rgb = cv2.cvtColor(self._rgba, cv2.COLOR_RGBA2RGB)
         sem = np.empty((h, w), np.int32)
         sem_fbo = self._sem_fbo if self._separate else self._fbo
         sem_fbo.read_into(sem, components=1, attachment=0 if self._separate else first + 1, dtype="i4")
@@ -371,8 +373,10 @@ class GLRenderer:
         fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if mask is None or p.chunks is None:
             p.vao.render()
+            self.faces_drawn += p.num_faces
             return
         faces = visible_faces(p.chunks, mask)
+        self.faces_drawn += len(faces)
         if len(faces) == p.chunks.num_faces:
             p.vao.render()
         elif len(faces):
