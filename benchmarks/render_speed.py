@@ -1,9 +1,15 @@
-"""Render FPS of the GL and embree backends at the standard sizes, plus their per-frame agreement.
+"""Render cost per frame of GL with chunk culling, GL without it (the previous path) and embree, same poses.
 
-Usage: python benchmarks/render_speed.py [--frames 100] [--out benchmarks/results/render_speed.json]
-Uses `ovon.scenes.procedural.generate_house(0)` when available, else a synthetic ~50k-triangle house.
-Poses are random eye positions inside the house at camera height with random yaw and pitch in
-{-30, 0, +30} deg, the same for every backend.
+    python benchmarks/render_speed.py OUT.json [--houses 0] [--frames 60] [--repeats 3] [--synthetic]
+
+For each procedural house, size (160x120, the 72x128 CPU portrait, 224x224, the paper's 360x640; HFOV of
+`CameraConfig`), RGB on/off and pose mode -- `random` (independent navigable poses, pitch -30/0/+30 deg) and
+`walk` (agent steps: 0.25 m forward, 30 deg turns, look up/down; culling reuses the last frame's visible
+set) -- the three renderers draw the same poses round-robin, so machine noise hits them alike. Reported:
+median CPU ms per frame (steadier than wall time on a shared machine) and wall ms, ratios (gl-nocull / gl
+= the culling speed-up, embree / gl), faces GL rasterised, frames where culled and unculled GL differ (must
+be 0) and GL-vs-embree instance agreement. Prints a table and writes JSON to OUT.json.
+`benchmarks/scan_scale.py` runs the same measurement on a built ~1M-triangle scan.
 """
 
 from __future__ import annotations
@@ -11,20 +17,27 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import platform
+import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from ovon.config.sim import CameraConfig
-from ovon.scenes.model import Mesh, Scene
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-SIZES = [(160, 120), (224, 224), (640, 360)]
+from ovon.config.sim import CameraConfig  # noqa: E402
+from ovon.scenes.model import Mesh, Scene  # noqa: E402
+
+SIZES = [(160, 120), (72, 128), (224, 224), (360, 640)]
+RENDERERS = ("gl", "gl-nocull", "embree")
+PITCHES_DEG = (-30.0, 0.0, 30.0)
 
 
 def synthetic_house(rooms: int = 4, room: float = 4.0, height: float = 2.6, seed: int = 0) -> Scene:
-    """rooms x rooms grid of box rooms (walls with door gaps) furnished with boxes and spheres."""
+    """rooms x rooms grid of box rooms (walls with door gaps) furnished with boxes and spheres (~50k faces)."""
     import trimesh
 
     rng = np.random.default_rng(seed)
@@ -79,90 +92,166 @@ def synthetic_house(rooms: int = 4, room: float = 4.0, height: float = 2.6, seed
         face_colors=np.concatenate(colors),
         face_instance=np.concatenate(face_ids),
     )
-    return Scene(scene_id=f"synthetic-house-{seed}", mesh=mesh, source=f"synthetic:{seed}")
+    return Scene(scene_id=f"synthetic-house-{seed}", mesh=mesh, floor_heights=[0.0], source=f"synthetic:{seed}")
 
 
-def load_house(synthetic: bool = False) -> Scene:
-    """The procedural house 0, or the synthetic one when asked or when the generator fails."""
-    if synthetic:
-        return synthetic_house()
-    try:
-        from ovon.scenes.procedural import generate_house
-
-        return generate_house(0)
-    except Exception as exc:  # generator missing or broken: still measure the renderers
-        print(f"generate_house(0) unavailable ({type(exc).__name__}: {exc}); using the synthetic house")
-        return synthetic_house()
+# ------------------------------------------------------------------------------------------------ poses
 
 
-def poses(scene: Scene, n: int, seed: int = 0) -> list[tuple[np.ndarray, float, float]]:
-    lo, hi = scene.mesh.bounds()
-    y = float(scene.floor_heights[0]) if scene.floor_heights else float(lo[1])
-    rng = np.random.default_rng(seed)
+def _floor(scene: Scene):  # noqa: ANN202
+    from ovon.sim.navgrid import build_navigation
+
+    nav = build_navigation(scene)
+    return max(nav.floors, key=lambda g: g.navigable.sum())
+
+
+def random_poses(scene: Scene, n: int, seed: int = 0, eye_height: float = 1.31) -> list[tuple]:
+    """Independent navigable positions at camera height, uniform yaw, pitch from PITCHES_DEG."""
+    g, rng = _floor(scene), np.random.default_rng(seed)
     out = []
     for _ in range(n):
-        eye = np.array([rng.uniform(lo[0] + 0.5, hi[0] - 0.5), y + 1.31, rng.uniform(lo[2] + 0.5, hi[2] - 0.5)])
-        out.append((eye, float(rng.uniform(-math.pi, math.pi)), math.radians(float(rng.choice([-30, 0, 30])))))
+        eye = g.random_point(rng) + np.array([0.0, eye_height, 0.0])
+        out.append((eye, float(rng.uniform(-math.pi, math.pi)), math.radians(float(rng.choice(PITCHES_DEG)))))
     return out
 
 
-def time_backend(scene: Scene, cfg: CameraConfig, backend: str, ps: list) -> tuple[float, list]:
-    """FPS from the median frame time (robust on a noisy shared machine) and the frames."""
+def walk_poses(scene: Scene, n: int, seed: int = 0, eye_height: float = 1.31) -> list[tuple]:
+    """An agent-like trajectory: forward 0.25 m when the cell ahead is navigable, else turn; 30 deg turns;
+    occasional look up/down -- consecutive frames overlap like an episode's."""
+    g, rng = _floor(scene), np.random.default_rng(seed)
+    pos, yaw, pitch, out = g.random_point(rng), float(rng.uniform(-math.pi, math.pi)), 0.0, []
+    for _ in range(n):
+        a = rng.choice(4, p=[0.5, 0.2, 0.2, 0.1])
+        ahead = pos + 0.25 * np.array([-math.sin(yaw), 0.0, -math.cos(yaw)])
+        if a == 0 and g.is_navigable(ahead):
+            pos = ahead
+        elif a == 3:
+            pitch = math.radians(float(rng.choice(PITCHES_DEG)))
+        else:
+            yaw += math.radians(30.0 if a == 1 else -30.0)
+        out.append((pos + np.array([0.0, eye_height, 0.0]), yaw, pitch))
+    return out
+
+
+# ------------------------------------------------------------------------------------------------ timing
+
+
+def compare(scene: Scene, cfg: CameraConfig, poses: list[tuple], repeats: int, renderers=RENDERERS) -> dict:  # noqa: ANN001
+    """Render `poses` with every renderer round-robin, `repeats` times; per-frame medians and checks."""
     from ovon.sim.render import make_renderer
 
-    r = make_renderer(scene, cfg, backend)
-    for p in ps[:5]:  # warm-up (numba compile cache, GL shader compile)
-        r.render(*p)
-    frames, times = [], []
-    for p in ps:
-        t = time.perf_counter()
-        frames.append(r.render(*p))
-        times.append(time.perf_counter() - t)
-    r.close()
-    return 1.0 / float(np.median(times)), frames
+    made = {}
+    for name in renderers:
+        backend = "embree" if name == "embree" else "gl"
+        made[name] = make_renderer(scene, replace(cfg, cull=name != "gl-nocull"), backend)
+    for r in made.values():  # warm-up: shader compile, JIT, first-frame buffers
+        r.render(*poses[0])
+    cpu: dict[str, list[float]] = {k: [] for k in made}
+    wall: dict[str, list[float]] = {k: [] for k in made}
+    faces: list[int] = []
+    mismatch, agree = 0, []
+    for rep in range(repeats):
+        for eye, yaw, pitch in poses:
+            frames = {}
+            for name, r in made.items():
+                c0, w0 = time.process_time(), time.perf_counter()
+                frames[name] = r.render(eye, yaw, pitch)
+                cpu[name].append(time.process_time() - c0)
+                wall[name].append(time.perf_counter() - w0)
+            if rep:
+                continue
+            if "gl" in frames:
+                faces.append(made["gl"].faces_drawn)
+            if "gl" in frames and "gl-nocull" in frames:
+                a, b = frames["gl"], frames["gl-nocull"]
+                same = np.array_equal(a.depth, b.depth) and np.array_equal(a.semantic, b.semantic)
+                mismatch += not (same and (a.rgb is None or np.array_equal(a.rgb, b.rgb)))
+            if "gl" in frames and "embree" in frames:
+                agree.append(float((frames["gl"].semantic == frames["embree"].semantic).mean()))
+    for r in made.values():
+        r.close()
+    out: dict = {
+        "cpu_ms": {k: 1e3 * float(np.median(v)) for k, v in cpu.items()},
+        "wall_ms": {k: 1e3 * float(np.median(v)) for k, v in wall.items()},
+    }
+    base = out["cpu_ms"].get("gl")
+    if base:
+        out["ratio_cpu_vs_gl"] = {k: v / base for k, v in out["cpu_ms"].items() if k != "gl"}
+        out["gl_faces_drawn_median"] = float(np.median(faces))
+    if "gl-nocull" in made and "gl" in made:
+        out["gl_culled_vs_unculled_mismatching_frames"] = mismatch
+    if agree:
+        out["gl_embree_instance_agreement"] = float(np.mean(agree))
+    return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--frames", type=int, default=100)
-    ap.add_argument("--backends", default="gl,embree")
-    ap.add_argument("--out", default="benchmarks/results/render_speed.json")
-    ap.add_argument("--synthetic", action="store_true", help="use the synthetic house, not generate_house(0)")
+def table_line(label: str, res: dict) -> str:
+    ms = res["cpu_ms"]
+    cells = " ".join(f"{ms.get(k, float('nan')):9.3f}" for k in RENDERERS)
+    r = res.get("ratio_cpu_vs_gl", {})
+    extra = f"  x{r.get('gl-nocull', float('nan')):5.2f}  x{r.get('embree', float('nan')):5.2f}"
+    extra += f"  {res.get('gl_faces_drawn_median', float('nan')):9.0f}"
+    extra += f"  {res.get('gl_culled_vs_unculled_mismatching_frames', '-')!s:>4}"
+    return f"{label:<34}{cells}{extra}"
+
+
+TABLE_HEAD = (
+    f"{'case':<34}" + " ".join(f"{k + ' ms':>9}" for k in ("gl", "nocull", "embree"))
+    + "  nocull/gl embree/gl  gl faces  diff"
+)  # fmt: skip
+
+
+def machine_meta() -> dict:
+    return {
+        "machine": platform.platform(),
+        "python": platform.python_version(),
+        "cpus": os.cpu_count(),
+        "loadavg_start": list(os.getloadavg()),
+        "timing": "median per-frame CPU time (time.process_time) and wall time; renderers round-robin per pose",
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", help="JSON result file")
+    ap.add_argument("--houses", default="0", help="procedural house seeds, comma-separated")
+    ap.add_argument("--synthetic", action="store_true", help="also the synthetic ~50k-face box house")
+    ap.add_argument("--frames", type=int, default=60, help="poses per mode")
+    ap.add_argument("--repeats", type=int, default=3, help="passes over the poses (medians pool them)")
+    ap.add_argument("--sizes", default=",".join(f"{w}x{h}" for w, h in SIZES), help="WxH list")
     args = ap.parse_args()
+    if args.frames < 1 or args.repeats < 1:
+        ap.error(f"--frames and --repeats must be >= 1, got {args.frames}, {args.repeats}")
+    try:
+        sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
+        seeds = [int(s) for s in args.houses.split(",") if s != ""]
+    except ValueError:
+        ap.error(f"--sizes wants WxH,WxH (got {args.sizes!r}); --houses integers (got {args.houses!r})")
+    os.environ.setdefault("LP_NUM_THREADS", "0")
+    from ovon.scenes.procedural import generate_house
 
-    scene = load_house(args.synthetic)
-    ps = poses(scene, args.frames)
-    backends = args.backends.split(",")
-    rows = []
-    print(f"scene {scene.scene_id}: {scene.mesh.num_faces} triangles, {args.frames} frames per cell")
-    print(f"{'size':>9} " + " ".join(f"{b + ' FPS':>11}" for b in backends) + "   id-agree   max|dz| mm  >1mm frac")
-    for w, h in SIZES:
-        cfg = CameraConfig(width=w, height=h, hfov_deg=79.0)
-        fps, frames = {}, {}
-        for b in backends:
-            fps[b], frames[b] = time_backend(scene, cfg, b, ps)
-        row = {"width": w, "height": h, "fps": fps}
-        line = f"{w}x{h:<5} " + " ".join(f"{fps[b]:>11.1f}" for b in backends)
-        if len(backends) == 2:
-            fa, fb = frames[backends[0]], frames[backends[1]]
-            agree = float(np.mean([(a.semantic == b.semantic).mean() for a, b in zip(fa, fb, strict=True)]))
-            diffs = []
-            for a, b in zip(fa, fb, strict=True):
-                both = (a.depth > 0) & (b.depth > 0) & (a.semantic == b.semantic)
-                diffs.append(np.abs(a.depth[both] - b.depth[both]))
-            d = np.concatenate(diffs)
-            dz, over = float(d.max(initial=0.0)), float((d > 1e-3).mean()) if d.size else 0.0
-            row.update(id_agreement=agree, max_depth_diff_m=dz, frac_depth_diff_over_1mm=over)
-            line += f"   {agree * 100:7.3f}%   {dz * 1000:8.4f}   {over:.1e}"
-        print(line)
-        rows.append(row)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    meta = {"scene": scene.scene_id, "triangles": scene.mesh.num_faces, "frames": args.frames}
-    meta["machine"] = platform.machine() + " " + platform.processor()
-    out.write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
-    print(f"wrote {out}")
+    scenes = [generate_house(s) for s in seeds] + ([synthetic_house()] if args.synthetic else [])
+    doc = {"meta": machine_meta() | {"frames": args.frames, "repeats": args.repeats}, "results": []}
+    print(TABLE_HEAD)
+    for scene in scenes:
+        modes = {"random": random_poses(scene, args.frames), "walk": walk_poses(scene, args.frames)}
+        for w, h in sizes:
+            for rgb in (True, False):
+                cfg = CameraConfig(width=w, height=h, rgb=rgb)
+                for mode, ps in modes.items():
+                    res = compare(scene, cfg, ps, args.repeats)
+                    res.update(scene=scene.scene_id, faces=scene.mesh.num_faces, width=w, height=h,
+                               hfov_deg=cfg.hfov_deg, rgb=rgb, poses=mode)  # fmt: skip
+                    doc["results"].append(res)
+                    label = f"{scene.scene_id[:12]} {w}x{h} {'rgb' if rgb else 'no-rgb'} {mode}"
+                    print(table_line(label, res), flush=True)
+    doc["meta"]["loadavg_end"] = list(os.getloadavg())
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(doc, indent=2))
+    print(f"load average {doc['meta']['loadavg_start'][0]:.2f} -> {doc['meta']['loadavg_end'][0]:.2f}; "
+          f"wrote {args.out}")  # fmt: skip
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
