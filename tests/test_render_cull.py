@@ -138,10 +138,17 @@ def test_camera_inside_chunks(fine_chunks: None) -> None:
     assert_identical(scene, CameraConfig(width=64, height=48, hfov_deg=79.0), ps)
 
 
-def test_textured_identical(fine_chunks: None) -> None:
+@pytest.mark.parametrize("annotated", [True, False], ids=["face-ids", "bare-scan"])
+def test_textured_identical(fine_chunks: None, annotated: bool) -> None:
+    """Textured meshes, with per-face ids or none (a bare scan: one id everywhere, no id attribute)."""
     scene = edge_scene(textured=True)
+    if not annotated:
+        scene.mesh.face_instance = None
     cfg = CameraConfig(width=96, height=72, hfov_deg=60.0)
     assert_identical(scene, cfg, poses(np.random.default_rng(2), 40))
+    if not annotated:
+        f = make_renderer(scene, cfg, "gl").render(np.array([0.0, 1.3, 0.0]), 0.3, 0.0)
+        assert (f.semantic == 0).all() and (f.depth > 0).all()
 
 
 def test_separate_semantic_mesh_identical(fine_chunks: None) -> None:

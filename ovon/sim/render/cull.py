@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-CHUNK_FACES = 256  # most triangles per chunk: per-frame test cost vs how tightly boxes fit the visible set
-CHUNK_EXTENT_M = 1.0  # a chunk's box grows no longer than this along any axis (one bigger triangle: alone)
+CHUNK_FACES = 128  # most triangles per chunk: per-frame test cost vs how tightly boxes fit the visible set
+CHUNK_EXTENT_M = 0.5  # a chunk's box grows no longer than this along any axis (one bigger triangle: alone)
 OCCLUSION_MARGIN_M = 1e-3  # a box must lie this far behind the drawn depth (>> float32 + 24-bit depth error)
 FRUSTUM_EPS = 1e-5  # clip-space slack: a box is outside a plane only when beyond it by more than this
 PIXEL_MARGIN = 1  # pixels added around a box's projected rectangle (vertex snapping, float error)
