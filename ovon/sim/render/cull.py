@@ -151,12 +151,15 @@ def occlusion_mask(
     focal: float,
     near: float,
     margin: float = OCCLUSION_MARGIN_M,
+    scale: float = 1.0,
+    hole_at: float = np.inf,
 ) -> np.ndarray:
-    """(N,) bool: `candidates` that are not hidden behind `depth` ((H, W) z-depth, row 0 at the top, 0 or inf =
-    nothing drawn), seen through `view` (4x4 camera-from-world) with square-pixel focal length `focal`.
+    """(N,) bool: `candidates` that are not hidden behind `depth` ((H, W), row 0 at the top: z-depth = value *
+    `scale`; values <= 0 or >= `hole_at` = nothing drawn, e.g. a GL depth buffer holding z / FAR, cleared to 1),
+    seen through `view` (4x4 camera-from-world) with square-pixel focal length `focal`.
 
     A box straddling the near plane is kept (its projection is unbounded)."""
-    levels, offs, dims = _pyramid(np.ascontiguousarray(depth, dtype=np.float32))
+    levels, offs, dims = _pyramid(np.ascontiguousarray(depth, dtype=np.float32), float(scale), float(hole_at))
     return _occlusion(
         chunks.lo, chunks.hi, candidates, np.ascontiguousarray(view, dtype=np.float64), float(focal),
         float(near), float(margin), depth.shape[0], depth.shape[1], levels, offs, dims,
@@ -164,9 +167,9 @@ def occlusion_mask(
 
 
 @numba.njit(cache=True, boundscheck=False, fastmath={"nnan", "nsz"})
-def _pyramid(depth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _pyramid(depth: np.ndarray, scale: float, hole_at: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Max-depth pyramid in one flat buffer: entry k holds tiles of 2^(k+1) x 2^(k+1) pixels (the finest level
-    has 2 x 2 tiles: a quarter of the pixels to reduce); no hit (0) counts as inf."""
+    has 2 x 2 tiles: a quarter of the pixels to reduce); holes (<= 0 or >= hole_at) count as inf."""
     h, w = depth.shape
     nl = 1
     hh, ww = (h + 1) // 2, (w + 1) // 2
@@ -196,7 +199,7 @@ def _pyramid(depth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             m, n = cmax[c0], cmin[c0]
             for c in range(c0 + 1, c1):
                 m, n = max(m, cmax[c]), min(n, cmin[c])
-            buf[tr * ww + t] = m if n > 0.0 else np.inf
+            buf[tr * ww + t] = m * scale if n > 0.0 and m < hole_at else np.inf
     for k in range(1, nl):
         ph, pw = dims[k - 1, 0], dims[k - 1, 1]
         hh, ww = (ph + 1) // 2, (pw + 1) // 2

@@ -39,7 +39,8 @@ from ovon.sim.render.texture import (
 from ovon.sim.types import Frame
 
 GUESS_FACES = 4096  # faces of the nearest frustum chunks drawn in a frame's first guess (besides last frame's)
-GUESS_GROWTH = 4.0  # needed faces above this many times the guess's: grow the guess instead of drawing them
+ADD_RATIO = 2  # missing chunks with at most 1/ADD_RATIO of the needed faces are added on top (tie-checked)
+GUESS_GROWTH = 1.0  # missing faces above this many times the needed ones drawn: grow the guess (depth only)
 SEMANTIC_GUESS_MARGIN_M = 0.05  # semantic chunks this far behind the visual depth are left out of the guess
 
 _CTX = None  # one shared context per process (creating one costs ~0.3 s)
@@ -180,6 +181,9 @@ class _Pass:
     chunks: Chunks | None
     num_faces: int
     visible: np.ndarray  # (N,) bool: chunks found visible in the last frame (the next frame's first guess)
+    fbo: object = None  # its framebuffer (cleared before each full draw)
+    zfbo: object = None  # the same depth buffer alone: depth-only draws and read-backs
+    zbuf: np.ndarray | None = None  # (H, W) float32 read-back of the depth buffer
 
 
 class GLRenderer:
@@ -194,6 +198,7 @@ class GLRenderer:
         ctx = self.ctx
         self._res: list = []  # GL objects to release on close
         self.faces_drawn = 0  # faces rasterised by the last render (all passes and draws): what culling saves
+        self._ties = self.ctx.query(samples=True)  # counts fragments that tie with the drawn depth
         self._proj = cam.projection_matrix(self.width, self.height, self.hfov_deg)
         self._focal = cam.focal_length(self.width, self.height, self.hfov_deg)
         size = (self.width, self.height)
@@ -224,18 +229,19 @@ class GLRenderer:
             self._color = self._keep(ctx.renderbuffer(size, components=4, dtype="f1"))
             self._rgba = np.empty((self.height, self.width, 4), np.uint8)
             attach.insert(0, self._color)
-        self._fbo = self._keep(
-            ctx.framebuffer(color_attachments=attach, depth_attachment=self._keep(ctx.depth_renderbuffer(size)))
-        )
+        self._fbo = self._attach(self._vis, attach)
         self._sem: _Pass | None = None
         if self._separate:
             self._sem = self._build(scene.semantic_source, [sem_define], None, sem)
-            self._sem_fbo = self._keep(
-                ctx.framebuffer(
-                    color_attachments=[self._ids], depth_attachment=self._keep(ctx.depth_renderbuffer(size))
-                )
-            )
-            self._sem_z = np.empty((self.height, self.width), np.float32)
+            self._sem_fbo = self._attach(self._sem, [self._ids])
+
+    def _attach(self, p: _Pass, colors: list) -> object:
+        """Framebuffer of pass `p` with these colour attachments and its own depth buffer (also alone)."""
+        depth = self._keep(self.ctx.depth_renderbuffer((self.width, self.height)))
+        p.fbo = self._keep(self.ctx.framebuffer(color_attachments=colors, depth_attachment=depth))
+        p.zfbo = self._keep(self.ctx.framebuffer(depth_attachment=depth))
+        p.zbuf = np.empty((self.height, self.width), np.float32)
+        return p.fbo
 
     def _keep(self, obj):  # noqa: ANN001, ANN202
         self._res.append(obj)
@@ -298,28 +304,13 @@ class GLRenderer:
         ctx.disable(ctx.CULL_FACE)
         ctx.enable(ctx.DEPTH_TEST)
         h, w = self.height, self.width
-        depth = np.empty((h, w), np.float32)
-        first = 1 if self.rgb else 0
         self.faces_drawn = 0
-
-        def read_depth() -> np.ndarray:
-            self._fbo.read_into(depth, components=1, attachment=first, dtype="f4")
-            return depth
-
-        if not self._draw_culled(self._vis, self._fbo, mvp, view_b, eye, clip, view, read_depth, None):
-            read_depth()  # the last draw was not read back yet
+        self._render_pass(self._vis, mvp, view_b, eye, clip, view, None)
+        first = 1 if self.rgb else 0
+        depth = np.empty((h, w), np.float32)
+        self._fbo.read_into(depth, components=1, attachment=first, dtype="f4")
         if self._sem is not None:
-
-            def read_sem_depth() -> np.ndarray:
-                # the depth buffer holds z / FAR (see _FRAG); cleared pixels (1.0) become inf
-                self._sem_fbo.read_into(self._sem_z, components=1, attachment=-1, dtype="f4")
-                z = self._sem_z
-                np.multiply(z, np.float32(cam.FAR), out=z)
-                z[z >= np.float32(cam.FAR)] = np.inf
-                return z
-
-            self._draw_culled(self._sem, self._sem_fbo, mvp, view_b, eye, clip, view, read_sem_depth, depth)
-
+            self._render_pass(self._sem, mvp, view_b, eye, clip, view, depth)
         rgb = None
         if self.rgb:
             # reading RGBA is a copy, reading RGB a per-pixel conversion in Mesa (10x slower); cv2 drops alpha
@@ -330,55 +321,91 @@ class GLRenderer:
         sem_fbo.read_into(sem, components=1, attachment=0 if self._separate else first + 1, dtype="i4")
         return Frame(rgb=rgb, depth=depth, semantic=sem)
 
-    def _draw_culled(self, p: _Pass, fbo, mvp: bytes, view_b: bytes, eye, clip, view, read_depth, guess_depth) -> bool:  # noqa: ANN001, E501
-        """Draw pass `p` exactly as if every face were drawn, drawing only chunks that can be visible; True
-        when `read_depth` has read the final draw.
+    def _render_pass(self, p: _Pass, mvp: bytes, view_b: bytes, eye, clip, view, guess_depth) -> None:  # noqa: ANN001
+        """Draw pass `p` exactly as if every face were drawn, drawing only chunks that can be visible.
 
         A first guess is drawn -- the chunks visible last frame plus the nearest ones in the frustum (or, for a
-        separate semantic mesh, those not hidden behind the visual depth) -- and every frustum chunk that its
-        depth does not hide is `needed` (see `cull.py`). When the guess missed some, the needed chunks are
-        drawn instead; a guess that left most of the view open (a cold start) first grows by the nearest
-        missing chunks, with a doubling budget, so that far rooms seen through its holes are not all drawn."""
+        separate semantic mesh, those the visual depth does not hide) -- and every frustum chunk that its depth
+        does not hide is `needed` (see `cull.py`). If the guess missed some, the needed chunks are drawn
+        instead. A guess that left much of the view open (a cold start, a turn) first grows, depth only, by
+        the nearest missing chunks with a doubling budget: its depth then hides far rooms seen through the
+        holes, which would otherwise all be needed."""
         p.prog["u_mvp"].write(mvp)
         p.prog["u_view"].write(view_b)
         for unit, tex in enumerate(p.textures):
             tex.use(unit)
         if p.chunks is None:
-            self._draw(p, fbo, None)
-            return False
+            self._draw(p, None)
+            return
         ch = p.chunks
         infrustum = frustum_mask(ch, clip)
         if faces_in(ch, infrustum) <= GUESS_FACES:  # few faces: culling more would cost more than it saves
-            self._draw(p, fbo, infrustum)
+            self._draw(p, infrustum)
             p.visible = infrustum
-            return False
+            return
         known = infrustum & p.visible
         if guess_depth is None:
             guess = known | nearest_chunks(ch, infrustum & ~known, eye, GUESS_FACES)
         else:
-            guess = known | occlusion_mask(
-                ch, infrustum, guess_depth, view, self._focal, cam.NEAR, SEMANTIC_GUESS_MARGIN_M
-            )
-        budget = GUESS_FACES
+            hidden_margin = SEMANTIC_GUESS_MARGIN_M
+            guess = known | occlusion_mask(ch, infrustum, guess_depth, view, self._focal, cam.NEAR, hidden_margin)
+        self._draw(p, guess)
+        drawn, depth_only, budget = guess, False, GUESS_FACES
         while True:
-            self._draw(p, fbo, guess)
-            needed = occlusion_mask(ch, infrustum, read_depth(), view, self._focal, cam.NEAR)
-            missing = needed & ~guess
-            if not missing.any():
+            needed = self._needed(p, infrustum, view)
+            missing = needed & ~drawn
+            if not missing.any() and not depth_only:
+                break  # the guess was complete: its frame is final
+            few = faces_in(ch, missing) * ADD_RATIO <= faces_in(ch, needed)
+            if not depth_only and few and self._add_without_ties(p, missing):
+                needed = self._needed(p, needed, view)
                 break
-            if faces_in(ch, needed) <= GUESS_GROWTH * faces_in(ch, guess):
-                self._draw(p, fbo, needed)
-                needed = occlusion_mask(ch, needed, read_depth(), view, self._focal, cam.NEAR)
+            if not missing.any() or faces_in(ch, missing) <= GUESS_GROWTH * faces_in(ch, needed & drawn):
+                self._draw(p, needed)
+                needed = self._needed(p, needed, view)  # tighter: against the final depth (next frame's guess)
                 break
             budget *= 2
-            guess = (guess & needed) | nearest_chunks(ch, missing, eye, budget)
+            grow = nearest_chunks(ch, missing, eye, budget)
+            self._draw(p, grow, depth_only=True)
+            drawn, depth_only = drawn | grow, True
         p.visible = needed
+
+    def _add_without_ties(self, p: _Pass, mask: np.ndarray) -> bool:
+        """Draw the chunks in `mask` on top of the frame, unless one of their fragments has exactly the depth
+        already drawn at its pixel (a tie, which only the original face order may resolve): then draw nothing
+        and return False. Without ties, the frame equals drawing both sets in the original order."""
+        faces = visible_faces(p.chunks, mask)
+        idx = _corner_indices(faces)
+        p.ibo.write(idx)
+        self.faces_drawn += 2 * len(faces)
+        ctx = self.ctx
+        p.zfbo.depth_mask = False
+        p.zfbo.use()
+        ctx.depth_func = "=="
+        with self._ties:
+            p.vao_subset.render(vertices=len(idx))
+        ctx.depth_func = "<"
+        p.zfbo.depth_mask = True
+        if self._ties.samples:
+            return False
+        p.fbo.use()
+        p.vao_subset.render(vertices=len(idx))
         return True
 
-    def _draw(self, p: _Pass, fbo, mask: np.ndarray | None) -> None:  # noqa: ANN001
-        """Clear `fbo` and draw the faces of the chunks in `mask` (all faces when None), in mesh order."""
-        fbo.use()
-        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+    def _needed(self, p: _Pass, candidates: np.ndarray, view: np.ndarray) -> np.ndarray:
+        """Candidates not hidden behind the depth buffer of pass `p` (which holds z / FAR, cleared to 1)."""
+        p.zfbo.read_into(p.zbuf, components=1, attachment=-1, dtype="f4")
+        return occlusion_mask(p.chunks, candidates, p.zbuf, view, self._focal, cam.NEAR, scale=cam.FAR, hole_at=1.0)
+
+    def _draw(self, p: _Pass, mask: np.ndarray | None, depth_only: bool = False) -> None:
+        """Draw the faces of the chunks in `mask` (all faces when None), in mesh order: after clearing the pass's
+        framebuffer, or (`depth_only`) into its depth buffer alone, on top of what is there (the depth buffer
+        keeps the nearest depth whatever the order, so such draws may come in any order)."""
+        if depth_only:
+            p.zfbo.use()
+        else:
+            p.fbo.use()
+            p.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         if mask is None or p.chunks is None:
             p.vao.render()
             self.faces_drawn += p.num_faces
