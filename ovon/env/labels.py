@@ -13,7 +13,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ovon.env.privileged import privileged_of
-from ovon.experts.rig import make_expert
+from ovon.experts.factory import make_expert
 
 KEY = "expert_action"
 NO_LABEL = -1  # the observation after an episode's last step has no label
