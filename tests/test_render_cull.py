@@ -120,8 +120,10 @@ def test_edge_scene_identical(fine_chunks: None, size: tuple[int, int, float], r
     scene = edge_scene()
     cfg = CameraConfig(width=size[0], height=size[1], hfov_deg=size[2], rgb=rgb)
     rng = np.random.default_rng(0)
+    two = zip(walk(np.array([0.0, 1.31, 2.0]), 30, rng), walk(np.array([1.0, 1.31, -2.0]), 30, rng), strict=True)
+    interleaved = [p for pair in two for p in pair]  # two envs sharing one renderer (one world per process)
     ps = poses(rng, 40) + sweep(np.array([0.05, 1.31, 0.1]), 12) + walk(np.array([0.0, 1.31, 2.0]), 40, rng)
-    culled, full = assert_identical(scene, cfg, ps)
+    culled, full = assert_identical(scene, cfg, ps + interleaved)
     assert culled < 0.7 * full  # culling did cull
 
 

@@ -38,7 +38,9 @@ from ovon.sim.render.texture import (
 )
 from ovon.sim.types import Frame
 
-GUESS_FACES = 4096  # faces of the nearest frustum chunks drawn in a frame's first guess (besides last frame's)
+GUESS_FACES = 4096  # nearest frustum faces in a first guess (besides a recent view's); fewer in view: no occlusion test
+RECENT_VIEWS = 8  # visible sets kept per pass: one per env sharing the renderer (several envs per process)
+SAME_VIEWER = 1.5  # a recent view this close (metres + |forward difference|) seeds the guess; a 30 deg turn is 0.52
 ADD_RATIO = 2  # missing chunks with at most 1/ADD_RATIO of the needed faces are added on top (tie-checked)
 GUESS_GROWTH = 1.0  # missing faces above this many times the needed ones drawn: grow the guess (depth only)
 SEMANTIC_GUESS_MARGIN_M = 0.05  # semantic chunks this far behind the visual depth are left out of the guess
@@ -180,7 +182,7 @@ class _Pass:
     textures: list
     chunks: Chunks | None
     num_faces: int
-    visible: np.ndarray  # (N,) bool: chunks found visible in the last frame (the next frame's first guess)
+    recent: list  # [(eye, forward, visible chunks (N,) bool)] of recent views, most recent last (first guesses)
     fbo: object = None  # its framebuffer (cleared before each full draw)
     zfbo: object = None  # the same depth buffer alone: depth-only draws and read-backs
     zbuf: np.ndarray | None = None  # (H, W) float32 read-back of the depth buffer
@@ -291,8 +293,7 @@ class GLRenderer:
             chunks = build_chunks(mesh.vertices, mesh.faces)
             ibo = self._keep(ctx.buffer(reserve=max(12 * mesh.num_faces, 4), dynamic=True))
             vao_subset = self._keep(ctx.vertex_array(prog, vao_content, index_buffer=ibo, index_element_size=4))
-        visible = np.zeros(0 if chunks is None else len(chunks), np.bool_)
-        return _Pass(prog, vao, vao_subset, ibo, [t for _, t in textures], chunks, mesh.num_faces, visible)
+        return _Pass(prog, vao, vao_subset, ibo, [t for _, t in textures], chunks, mesh.num_faces, [])
 
     def render(self, eye: np.ndarray, yaw: float, pitch: float) -> Frame:
         """Draw the visual mesh (and the semantic mesh when separate) and read the attachments back."""
@@ -324,7 +325,8 @@ class GLRenderer:
     def _render_pass(self, p: _Pass, mvp: bytes, view_b: bytes, eye, clip, view, guess_depth) -> None:  # noqa: ANN001
         """Draw pass `p` exactly as if every face were drawn, drawing only chunks that can be visible.
 
-        A first guess is drawn -- the chunks visible last frame plus the nearest ones in the frustum (or, for a
+        A first guess is drawn -- the chunks visible from the nearest recent view plus the nearest ones in the
+        frustum (or, for a
         separate semantic mesh, those the visual depth does not hide) -- and every frustum chunk that its depth
         does not hide is `needed` (see `cull.py`). If the guess missed some, the needed chunks are drawn
         instead. A guess that left much of the view open (a cold start, a turn) first grows, depth only, by
@@ -341,9 +343,9 @@ class GLRenderer:
         infrustum = frustum_mask(ch, clip)
         if faces_in(ch, infrustum) <= GUESS_FACES:  # few faces: culling more would cost more than it saves
             self._draw(p, infrustum)
-            p.visible = infrustum
             return
-        known = infrustum & p.visible
+        seen = _recent_view(p.recent, eye, view)
+        known = infrustum & p.recent[seen][2] if seen is not None else np.zeros_like(infrustum)
         if guess_depth is None:
             guess = known | nearest_chunks(ch, infrustum & ~known, eye, GUESS_FACES)
         else:
@@ -368,7 +370,7 @@ class GLRenderer:
             grow = nearest_chunks(ch, missing, eye, budget)
             self._draw(p, grow, depth_only=True)
             drawn, depth_only = drawn | grow, True
-        p.visible = needed
+        _remember_view(p.recent, seen, eye, view, needed)
 
     def _add_without_ties(self, p: _Pass, mask: np.ndarray) -> bool:
         """Draw the chunks in `mask` on top of the frame, unless one of their fragments has exactly the depth
@@ -423,6 +425,24 @@ class GLRenderer:
         for obj in reversed(self._res):
             obj.release()
         self._res.clear()
+
+
+def _recent_view(recent: list, eye: np.ndarray, view: np.ndarray) -> int | None:
+    """Index of the recent view nearest to this one (eye distance + forward-vector distance), if any is
+    within SAME_VIEWER: envs sharing a renderer (one world per process) each keep finding their own."""
+    if not recent:
+        return None
+    fwd = -view[2, :3]
+    d = [np.linalg.norm(eye - e) + np.linalg.norm(fwd - f) for e, f, _ in recent]
+    j = int(np.argmin(d))
+    return j if d[j] <= SAME_VIEWER else None
+
+
+def _remember_view(recent: list, seen: int | None, eye: np.ndarray, view: np.ndarray, visible: np.ndarray) -> None:
+    if seen is not None:
+        del recent[seen]
+    recent.append((np.array(eye, dtype=np.float64), -view[2, :3].copy(), visible))
+    del recent[:-RECENT_VIEWS]
 
 
 def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
