@@ -6,6 +6,10 @@ written from view space for precision rather than un-projected from the depth bu
 (R32I) and a depth buffer. A separate semantic mesh with other triangles (real scans) is drawn in a
 second pass into its own framebuffer; one with the same triangles shares the single pass. The
 projection flips y, so the bottom-up GL read-back comes out with row 0 at the top.
+
+llvmpipe pays for every triangle it rasterises, visible or not, so each pass draws only the mesh chunks
+that can be visible (`cull.py`: frustum and depth-buffer occlusion tests, survivors in the original face
+order, depth ties checked): frames are bitwise those of drawing everything (`camera.cull = False`).
 """
 
 from __future__ import annotations
@@ -326,12 +330,12 @@ class GLRenderer:
         """Draw pass `p` exactly as if every face were drawn, drawing only chunks that can be visible.
 
         A first guess is drawn -- the chunks visible from the nearest recent view plus the nearest ones in the
-        frustum (or, for a
-        separate semantic mesh, those the visual depth does not hide) -- and every frustum chunk that its depth
-        does not hide is `needed` (see `cull.py`). If the guess missed some, the needed chunks are drawn
-        instead. A guess that left much of the view open (a cold start, a turn) first grows, depth only, by
-        the nearest missing chunks with a doubling budget: its depth then hides far rooms seen through the
-        holes, which would otherwise all be needed."""
+        frustum (for a separate semantic mesh: those the visual depth does not hide) -- and every frustum chunk
+        that its depth does not hide is `needed` (see `cull.py`). If the guess missed a few, they are added on
+        top when none of their fragments ties with the drawn depth, else the needed chunks are drawn afresh. A
+        guess that left much of the view open (a cold start, a turn) first grows, depth only, by the nearest
+        missing chunks with a doubling budget: its depth then hides far rooms seen through the holes, which
+        would otherwise all be needed."""
         p.prog["u_mvp"].write(mvp)
         p.prog["u_view"].write(view_b)
         for unit, tex in enumerate(p.textures):
