@@ -5,7 +5,8 @@
 For each procedural house, size (160x120, the 72x128 CPU portrait, 224x224, the paper's 360x640; HFOV of
 `CameraConfig`), RGB on/off and pose mode -- `random` (independent navigable poses, pitch -30/0/+30 deg) and
 `walk` (agent steps: 0.25 m forward, 30 deg turns, look up/down; culling reuses the last frame's visible
-set) -- the three renderers draw the same poses round-robin, so machine noise hits them alike. Reported:
+set) -- the three renderers draw the same poses round-robin (in rotating order: each goes first, after the
+others have used the caches, equally often), so machine noise hits them alike. Reported:
 median CPU ms per frame (steadier than wall time on a shared machine) and wall ms, ratios (gl-nocull / gl
 = the culling speed-up, embree / gl), faces GL rasterised, frames where culled and unculled GL differ (must
 be 0) and GL-vs-embree instance agreement. Prints a table and writes JSON to OUT.json.
@@ -150,10 +151,12 @@ def compare(scene: Scene, cfg: CameraConfig, poses: list[tuple], repeats: int, r
     wall: dict[str, list[float]] = {k: [] for k in made}
     faces: list[int] = []
     mismatch, agree = 0, []
+    names = list(made)
     for rep in range(repeats):
-        for eye, yaw, pitch in poses:
+        for k, (eye, yaw, pitch) in enumerate(poses):
             frames = {}
-            for name, r in made.items():
+            for name in names[k % len(names) :] + names[: k % len(names)]:  # each goes first as often (caches)
+                r = made[name]
                 c0, w0 = time.process_time(), time.perf_counter()
                 frames[name] = r.render(eye, yaw, pitch)
                 cpu[name].append(time.process_time() - c0)

@@ -321,4 +321,13 @@ def _nearest(lo, hi, start, candidates, eye, budget):  # noqa: ANN001, ANN202
 
 def faces_in(chunks: Chunks, mask: np.ndarray) -> int:
     """Number of faces in the chunks of `mask`."""
-    return int(np.dot(chunks.count, mask))
+    return int(_count(chunks.start, mask))
+
+
+@numba.njit(cache=True)
+def _count(start: np.ndarray, mask: np.ndarray) -> int:
+    n = 0
+    for i in range(mask.shape[0]):
+        if mask[i]:
+            n += start[i + 1] - start[i]
+    return n
