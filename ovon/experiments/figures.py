@@ -58,19 +58,23 @@ def failure_figure(fig_data: dict, out: Path) -> Path:
         xs = [i + (j - (n - 1) / 2) * width for i in range(len(groups))]
         vals = [g["ours"].get(split, 0.0) if g["ours"] else 0.0 for g in groups]
         ax.bar(xs, vals, width, color=[g["color"] for g in groups], alpha=0.45 + 0.55 * (j + 1) / n,
-               edgecolor="black", linewidth=0.5, label=split)
+               edgecolor="black", linewidth=0.5)
         for x, g in zip(xs, groups):
             if g["paper"]:
                 ax.plot([x], [g["paper"][split]], marker="D", color="black", markersize=4)
     for i, g in enumerate(groups):
         if g["paper_range"]:
             ax.fill_between([i - 0.4, i + 0.4], *g["paper_range"], color="grey", alpha=0.2, linewidth=0)
+    from matplotlib.patches import Patch
+
+    handles = [Patch(facecolor="grey", alpha=0.45 + 0.55 * (j + 1) / n, edgecolor="black", label=s)
+               for j, s in enumerate(splits)]
     ax.set_xticks(range(len(groups)), [g["name"] for g in groups], rotation=20, fontsize=8)
     ax.set_ylabel("% of episodes")
     status = "" if fig_data["groups"] and fig_data["groups"][0]["ours"] else " (not run)"
     ax.set_title(f"{fig_data['caption']}{status}\nbars: ours per split (light to dark); diamonds / grey band: paper",
                  fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(handles=handles, fontsize=7)
     return _save(fig, out)
 
 

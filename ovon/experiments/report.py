@@ -110,14 +110,16 @@ def collect(plan: Plan) -> dict:
     out = {"experiments": {}, "scale": plan.scale.name, "scale_description": plan.scale.description,
            "root": str(plan.root), "cells": _cells_info(plan, statuses)}
     for exp in plan.experiments:
-        out["experiments"][exp.name] = _experiment(exp, evals)
+        out["experiments"][exp.name] = experiment_results(exp, evals)
     for info in evals.values():
         info.pop("records", None)
     out["evaluations"] = evals
     return out
 
 
-def _experiment(exp: Experiment, evals: dict[str, dict]) -> dict:
+def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
+    """An experiment's table, figures and findings from `evals` (evaluation cell -> {"summary", "status",
+    "setup", "records"}); findings are judged on ours and on the paper's numbers."""
     from ovon.reports.compare import failure_breakdown
 
     res: dict[str, Any] = {"title": exp.title, "paper_ref": exp.paper_ref, "description": exp.description}

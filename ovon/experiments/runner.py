@@ -109,14 +109,17 @@ def _progress_count(cell: Cell) -> int | None:
     return None
 
 
-def run_command(cell: Cell, argv: list[str], log: Path, on_poll=None) -> int:
-    """Run one command of a cell, output appended to `log`; returns its exit code."""
+def run_command(cell: Cell, argv: list[str], log: Path, on_poll=None, on_start=None) -> int:
+    """Run one command of a cell, output appended to `log`; returns its exit code. `on_start(pid)` is
+    called once the child runs, `on_poll()` every `POLL_S` seconds while it does."""
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "ab") as f:
         f.write(f"\n===== {time.strftime('%Y-%m-%d %H:%M:%S')} {display(cell, argv)}\n".encode())
         f.flush()
         proc = subprocess.Popen(exec_argv(cell, argv), stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 env=child_env(), preexec_fn=_parent_death_signal())
+    if on_start is not None:
+        on_start(proc.pid)
     try:
         while True:
             try:
@@ -166,9 +169,13 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
         if task is not None and n is not None:
             progress.update(task, completed=n)
 
+    def started(pid: int) -> None:
+        rec["pid"] = pid
+        write_record(plan, cell, rec)
+
     try:
         for argv in commands_to_run(cell):
-            rc = run_command(cell, argv, log, poll)
+            rc = run_command(cell, argv, log, poll, started)
             if rc != 0:
                 break
     except BaseException:
