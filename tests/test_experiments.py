@@ -4,6 +4,7 @@ SIGKILL, resumes without repeating finished cells and reports missing cells as "
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -175,7 +176,8 @@ def test_bad_definitions_fail_with_one_line(case: str, tmp_path: Path) -> None:
 
 
 def test_missing_paper_numbers_and_bad_references_are_refused(tmp_path: Path) -> None:
-    base = ("title: t\ntable: {caption: c, columns: [{name: v, split: val_seen}], rows: [{name: DAgRL, eval: dagrl%s}]}\n")
+    base = ("title: t\ntable: {caption: c, columns: [{name: v, split: val_seen}], "
+            "rows: [{name: DAgRL, eval: dagrl%s}]}\n")
     with pytest.raises(DefinitionError, match="no paper numbers"):
         resolve([load_experiment(str(_write(tmp_path / "a.yaml", base % "")))], "cpu", tmp_path)
     ok = base % ", paper: {v: [1, null, 1, null]}"
@@ -194,8 +196,6 @@ def test_cli_dry_run_prints_each_cells_status_and_command(tmp_path: Path) -> Non
     from ovon.cli.main import main
 
     out = io.StringIO()
-    import contextlib
-
     with contextlib.redirect_stdout(out):
         assert main(["experiment", "run", "main", "--scale", "paper", "--root", str(tmp_path), "--dry-run",
                      "--shard", "0/2"]) == 0
@@ -342,3 +342,7 @@ def test_main_at_tiny_scale_end_to_end(tmp_path: Path) -> None:
     assert again.ok and all(c.startswith("eval:") for c in again.ran) and again.ran
     text = (tmp_path / "tiny" / "reports" / "main" / "report.md").read_text()
     assert "over 3 seeds" in text
+    redone = run(more, redo_cells=["train:bc"], console=quiet())  # BC, BC->RL and their evaluations again
+    assert sorted(redone.ran) == ["eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
+    assert (tmp_path / "tiny" / "train" / "bc.old-1" / "policy.pt").is_file()
+    assert (tmp_path / "tiny" / "train" / "bc.old-1" / "experiment_record.json").is_file()

@@ -183,7 +183,8 @@ def _cells_info(plan: Plan, statuses: dict[str, Status]) -> dict:
         rec = read_record(plan, cell) or {}
         info = {"status": statuses[cid].state, "detail": statuses[cid].detail,
                 "commands": [display(cell, argv) for argv in cell.commands],
-                "wall_min": round(float(rec.get("wall_s", 0.0)) / 60, 1), "attempts": rec.get("attempts", 0)}
+                "wall_min": round(float(rec.get("wall_s", 0.0)) / 60, 1), "attempts": rec.get("attempts", 0),
+                "code": rec.get("code", "")}
         if cell.kind == "train":
             info["updates"] = last_update(cell.folder)
             info["planned_updates"] = cell.total
@@ -271,7 +272,8 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
     parts += ["", *[f"![curve {p}]({p})" for p in figures.get("_curves", [])], "",
               "## Commands", "", f"Every cell's command (all of them: `{again}`).", "", "```"]
     for cid, info in data["cells"].items():
-        parts += [f"# {cid}: {info['status']}, {info['wall_min']} min", *info["commands"]]
+        code = f", {info['code']}" if info["code"] else ""
+        parts += [f"# {cid}: {info['status']}, {info['wall_min']} min{code}", *info["commands"]]
     parts += ["```", ""]
     return "\n".join(parts)
 

@@ -134,6 +134,22 @@ def run_command(cell: Cell, argv: list[str], log: Path, on_poll=None, on_start=N
     return int(proc.returncode)
 
 
+def code_version() -> str:
+    """The ovon code a cell ran with: its version and, in a git checkout, the commit (+dirty)."""
+    import ovon
+
+    text = f"ovon {getattr(ovon, '__version__', '?')}"
+    where = str(Path(ovon.__file__).resolve().parent)
+    try:
+        rev = subprocess.run(["git", "-C", where, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                             timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "-C", where, "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return text
+    return f"{text} ({rev}{'+dirty' if dirty else ''})" if rev else text
+
+
 def log_tail(log: Path, lines: int = 6) -> str:
     try:
         text = log.read_bytes()[-8000:].decode("utf-8", "replace")
@@ -145,8 +161,9 @@ def log_tail(log: Path, lines: int = 6) -> str:
 
 # ----- one cell --------------------------------------------------------------------------------------
 def commands_to_run(cell: Cell) -> list[list[str]]:
-    """The cell's commands as run now: a training run with a checkpoint resumes it."""
-    if cell.kind == "train" and (cell.folder / "checkpoint.pt").is_file():
+    """The cell's commands as run now: a training folder that holds anything is resumed (`--resume`
+    continues from its checkpoint, or starts afresh when none was written yet)."""
+    if cell.kind == "train" and cell.folder.is_dir() and any(cell.folder.iterdir()):
         return [[*argv, "--resume"] for argv in cell.commands]
     return cell.commands
 
@@ -155,7 +172,8 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
     """Run the cell's commands under its record; returns the exit code (0 = finished)."""
     rec = read_record(plan, cell) or {}
     rec.update({"kind": cell.kind, "name": cell.name, "identity": identity(plan, cell), "state": "running",
-                "attempts": int(rec.get("attempts", 0)) + 1, "started": time.strftime("%Y-%m-%d %H:%M:%S")})
+                "attempts": int(rec.get("attempts", 0)) + 1, "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+                "code": code_version()})
     write_record(plan, cell, rec)
     log = log_path(plan, cell)
     t0 = time.perf_counter()

@@ -254,20 +254,19 @@ def lock_holder(plan: Plan, cell: Cell) -> str | None:
     """Who holds the cell's lock right now ("pid N on HOST since ..."), None when nobody does (a status
     check creates nothing)."""
     path = lock_path(plan, cell)
-    if not path.exists():
+    if fcntl is None or not path.exists():
         return None
-    if fcntl is not None:
-        try:
-            fd = os.open(path, os.O_RDONLY)
-        except OSError:
-            return None
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-            return None
-        except OSError:
-            pass
-        finally:
-            os.close(fd)
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return None
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
     try:
         info = json.loads(lock_path(plan, cell).read_text())
         return f"pid {info['pid']} on {info['host']} since {info['since']}"
