@@ -148,6 +148,16 @@ def test_only_takes_what_a_cell_needs(tmp_path: Path) -> None:
         parse_shard("2/2")
 
 
+def test_redo_takes_what_depends_on_a_cell_and_never_a_users_dataset(tmp_path: Path) -> None:
+    plan = resolve([load_experiment("main")], "cpu", tmp_path)
+    result = run(plan, redo_cells=["train:bc"], dry_run=True, console=quiet())
+    assert sorted(c for c, s in result.statuses.items() if s.state == "redo") == [
+        "eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
+    paper = resolve([load_experiment("main")], "paper", tmp_path)
+    with pytest.raises(DefinitionError, match="never moves"):
+        run(paper, redo_cells=["data"], dry_run=True, console=quiet())
+
+
 def _write(path: Path, text: str) -> Path:
     path.write_text(text)
     return path

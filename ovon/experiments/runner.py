@@ -257,15 +257,17 @@ def describe_plan(plan: Plan, ids: list[str], statuses: dict[str, Status]) -> li
     for cid in ids:
         cell, st = plan.cells[cid], statuses[cid]
         lines.append(f"{cid:<22} {st}")
-        for argv in commands_to_run(cell) if st.state != "done" else cell.commands:
+        for argv in cell.commands if st.state in ("done", "redo") else commands_to_run(cell):
             lines.append(f"    {display(cell, argv)}")
     return lines
 
 
-def _preflight(plan: Plan, ids: list[str], statuses: dict[str, Status]) -> None:
-    changed = [f"{c} ({statuses[c].detail})" for c in ids if statuses[c].state == "changed"]
-    if changed:
-        names = ",".join(c.split(":", 1)[1] for c in ids if statuses[c].state == "changed")
+def _preflight(plan: Plan, ids: list[str], statuses: dict[str, Status], redone: list[str]) -> None:
+    """Refuse, before any work, cells changed since they ran (unless redone) and a missing user dataset."""
+    stale = [c for c in ids if statuses[c].state == "changed" and c not in redone]
+    if stale:
+        changed = [f"{c} ({statuses[c].detail})" for c in stale]
+        names = ",".join(c.split(":", 1)[1] for c in stale)
         raise DefinitionError(f"cell(s) changed since they ran: {'; '.join(changed)}; fix: --redo {names} recomputes "
                               "them and what depends on them (old folders are kept as <folder>.old-N), or restore "
                               "the definition")
@@ -276,9 +278,8 @@ def _preflight(plan: Plan, ids: list[str], statuses: dict[str, Status]) -> None:
                               "data.scenes=/path/to/scene_datasets")
 
 
-def redo(plan: Plan, ids: list[str], console: Console) -> list[str]:
-    """Move the old results of `ids` and their dependents aside; returns the cells redone."""
-    cascade = dependents(plan, ids)
+def redo(plan: Plan, cascade: list[str], console: Console) -> None:
+    """Move the old results of the cells in `cascade` aside (see `dependents`)."""
     busy = [f"{c} ({h})" for c in cascade if (h := lock_holder(plan, plan.cells[c]))]
     if busy:
         raise DefinitionError(f"--redo: cell(s) in use by another process: {'; '.join(busy)}; fix: wait for them")
@@ -286,7 +287,6 @@ def redo(plan: Plan, ids: list[str], console: Console) -> list[str]:
         dest = move_aside(plan, plan.cells[cid])
         if dest is not None:
             say(console, f"{cid}: old results kept in {dest}")
-    return cascade
 
 
 def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None = None,
@@ -299,16 +299,21 @@ def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None
     console = console or Console()
     ids = select(plan, only, shard)
     statuses = plan_status(plan)
+    cascade = dependents(plan, match_cells(plan, list(redo_cells))) if redo_cells else []
+    if "data:data" in cascade and not plan.cells["data:data"].commands:
+        raise DefinitionError(f"--redo data: scale {plan.scale.name!r} reads your own dataset ({plan.episodes_dir}), "
+                              "which the runner never moves; fix: --redo the training or evaluation cells instead")
+    for cid in cascade:
+        statuses[cid] = Status("redo", "its old folder will be kept as <folder>.old-N")
     if dry_run:
         head = f"{plan.names} at scale {plan.scale.name}, root {plan.root}: {len(ids)} of {len(plan.cells)} cells"
         say(console, head + (f" (shard {shard[0]}/{shard[1]})" if shard else ""))
         for line in describe_plan(plan, ids, statuses):
             say(console, line)
         return RunResult({c: statuses[c] for c in ids})
-    if redo_cells:
-        redo(plan, match_cells(plan, list(redo_cells)), console)
-        statuses = plan_status(plan)
-    _preflight(plan, ids, statuses)
+    _preflight(plan, ids, statuses, cascade)
+    if cascade:
+        redo(plan, cascade, console)
     (plan.base / "data").mkdir(parents=True, exist_ok=True)  # the shared goal-text cache lives there
     result = _loop(plan, ids, wait, console)
     if write_report:

@@ -36,7 +36,7 @@ except ImportError:  # pragma: no cover - Windows
 
 @dataclass
 class Status:
-    state: str  # done | partial | missing | failed | changed | running | waiting | unavailable
+    state: str  # done | partial | missing | failed | changed | running | waiting | unavailable | redo
     detail: str = ""
 
     def __str__(self) -> str:
