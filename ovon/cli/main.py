@@ -7,7 +7,7 @@ import argparse
 import importlib
 import sys
 
-GROUPS = ["scenes", "sim", "dataset", "evaluate", "train", "demo"]
+GROUPS = ["scenes", "sim", "dataset", "evaluate", "train", "demo", "experiment"]
 
 
 def build_parser() -> argparse.ArgumentParser:
