@@ -98,8 +98,10 @@ def build_scan(target_triangles: int, tex_size: int, seed: int = 0, other_diagon
     a texture atlas of `atlas_tiles(len(boxes))` tiles per side."""
     rng = np.random.default_rng(seed)
     boxes = scan_boxes(rng)
-    area = sum(2 * ((h[0] - l[0]) * (h[1] - l[1]) + (h[1] - l[1]) * (h[2] - l[2]) + (h[0] - l[0]) * (h[2] - l[2]))
-               for l, h in boxes)
+    area = sum(
+        2 * ((h[0] - l[0]) * (h[1] - l[1]) + (h[1] - l[1]) * (h[2] - l[2]) + (h[0] - l[0]) * (h[2] - l[2]))
+        for l, h in boxes
+    )
     edge = math.sqrt(2 * area / target_triangles)
     verts, faces, uvs, off = [], [], [], 0
     tiles = atlas_tiles(len(boxes))
@@ -113,8 +115,12 @@ def build_scan(target_triangles: int, tex_size: int, seed: int = 0, other_diagon
         off += len(v)
     yy, xx = np.mgrid[0:tex_size, 0:tex_size]
     texture = np.stack([(xx * 7 + yy * 3) % 256, (xx ^ yy) % 256, (yy * 5) % 256], -1).astype(np.uint8)
-    return (np.concatenate(verts).astype(np.float32), np.concatenate(faces).astype(np.int64),
-            np.concatenate(uvs).astype(np.float32), texture)
+    return (
+        np.concatenate(verts).astype(np.float32),
+        np.concatenate(faces).astype(np.int64),
+        np.concatenate(uvs).astype(np.float32),
+        texture,
+    )
 
 
 def atlas_tiles(num_boxes: int) -> int:
@@ -152,9 +158,12 @@ def measure(scene, label: str, frames: int, sizes: list[tuple[int, int]], repeat
     from ovon.sim.navgrid import build_navigation, clear_cache
     from ovon.sim.render import gl_available
 
-    out: dict = {"scene": label, "triangles": scene.mesh.num_faces,
-                 "texture": None if scene.mesh.texture is None else list(scene.mesh.texture.shape[:2]),
-                 "semantic_mesh_triangles": None if scene.semantic_mesh is None else scene.semantic_mesh.num_faces}
+    out: dict = {
+        "scene": label,
+        "triangles": scene.mesh.num_faces,
+        "texture": None if scene.mesh.texture is None else list(scene.mesh.texture.shape[:2]),
+        "semantic_mesh_triangles": None if scene.semantic_mesh is None else scene.semantic_mesh.num_faces,
+    }
     clear_cache()
     t = time.perf_counter()
     nav = build_navigation(scene, AgentConfig(), NavConfig())
@@ -239,10 +248,14 @@ def main() -> int:
     print(f"{'metric':<26}{'house':>12}{'scan':>12}{'ratio':>9}")
     for k in keys:
         b = base.get(k)
-        print(f"{k:<26}{(f'{b:.3f}' if b is not None else '-'):>12}{res[k]:>12.3f}"
-              f"{(f'{ratios[k]:.2f}' if k in ratios else '-'):>9}")
-    print(f"triangles: house {base['triangles']:,}, scan {res['triangles']:,}; scan files {res['file_mb']:.1f} MB; "
-          f"load average {meta['loadavg_start'][0]:.2f} -> {meta['loadavg_end'][0]:.2f}")
+        print(
+            f"{k:<26}{(f'{b:.3f}' if b is not None else '-'):>12}{res[k]:>12.3f}"
+            f"{(f'{ratios[k]:.2f}' if k in ratios else '-'):>9}"
+        )
+    print(
+        f"triangles: house {base['triangles']:,}, scan {res['triangles']:,}; scan files {res['file_mb']:.1f} MB; "
+        f"load average {meta['loadavg_start'][0]:.2f} -> {meta['loadavg_end'][0]:.2f}"
+    )
     Path(args.out).write_text(json.dumps(doc, indent=2))
     print(f"wrote {args.out}")
     return 0
