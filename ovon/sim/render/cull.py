@@ -1,9 +1,9 @@
 """Exact visibility culling for the rasteriser: mesh chunks tested against the view frustum and a depth buffer.
 
 Why: llvmpipe pays ~150-400 ns for every triangle that reaches rasterisation (setup, binning, attribute
-planes), visible or not, so a 1M-triangle scan costs ~60 ms a frame at 160x120 although a few thousand
-triangles are visible, and a 14k-triangle house pays for the rooms behind the walls. Testing a few thousand
-chunk boxes on the CPU costs microseconds.
+planes), visible or not, so drawing all of a 1M-triangle scan costs 40-60 ms a frame at 160x120 although a
+few thousand triangles are visible, and a house pays for the rooms behind its walls. Testing ten thousand
+chunk boxes on the CPU costs tens of microseconds.
 
 Exactness (frames are bitwise identical with and without culling): a chunk is dropped only when none of its
 fragments can be the nearest at any pixel -- its box is outside a frustum plane, or its nearest point is
