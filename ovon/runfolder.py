@@ -278,9 +278,13 @@ class RunFolder:
                                  "writable folder") from None
         lock = _Lock(path, what)
         try:
-            identity = {"format": FORMAT, "kind": kind, "config": _jsonable(dict(config)),
-                        "inputs": _jsonable(dict(inputs or {}))}
-            stored, resumed = cls._reconcile(path, kind, identity, resume, tuple(may_change), markers, what)
+            # Keys that may change are not part of what the folder is: not stored, not compared.
+            may = tuple(may_change)
+            identity = {"format": FORMAT, "kind": kind,
+                        "config": _without(_jsonable(dict(config)), [m for m in may if not m.startswith("inputs.")]),
+                        "inputs": _without(_jsonable(dict(inputs or {})),
+                                           [m.removeprefix("inputs.") for m in may if m.startswith("inputs.")])}
+            stored, resumed = cls._reconcile(path, kind, identity, resume, may, markers, what)
         except BaseException:
             lock.release()
             raise
@@ -371,6 +375,18 @@ class RunFolder:
         if exc_type is not None:
             self.abandon_if_unused()
         self.close()
+
+
+def _without(d: Mapping[str, Any], prefixes: Iterable[str], where: str = "") -> dict[str, Any]:
+    """`d` without the dotted keys (and their sub-keys) in `prefixes`."""
+    prefixes = list(prefixes)
+    out = {}
+    for k, v in d.items():
+        key = f"{where}.{k}" if where else str(k)
+        if _matches(key, prefixes):
+            continue
+        out[k] = _without(v, prefixes, key) if isinstance(v, Mapping) else v
+    return out
 
 
 def _union(old: Mapping[str, Any], new: Mapping[str, Any]) -> dict[str, Any]:

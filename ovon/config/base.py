@@ -405,8 +405,9 @@ def _type_ok(value: Any, tp: Any) -> bool:
 
 
 def _short(v: Any) -> str:
+    """repr of a value, head and tail kept when long (a path's file name is at its end)."""
     s = repr(v)
-    return s if len(s) <= 60 else s[:57] + "..."
+    return s if len(s) <= 120 else s[:50] + "..." + s[-60:]
 
 
 def _expected(f: dataclasses.Field, tp: Any) -> str:

@@ -294,14 +294,14 @@ def validate_dataset(
             for i, ep in enumerate(eps):
                 rep.episodes += 1
                 where = f"{split}/{scene}: episodes[{i}] (id {ep.episode_id})"
-                if chk.bad(i):
-                    for kind, detail in chk.episodes[i]:
-                        rep.error(kind, f"{where}: {detail}")
-                    continue
                 try:
                     path = str(resolve_scene_path(ep.scene_id, scenes))
                 except (DatasetError, FileNotFoundError) as e:
                     rep.error("scene", f"{where}: {e}")
+                    continue
+                if chk.bad(i):
+                    for kind, detail in chk.episodes[i]:
+                        rep.error(kind, f"{where}: {detail}")
                     continue
                 nav = scene_navigation(path, AgentConfig(), NavConfig())
                 goals = shard.goals_for(ep)

@@ -124,17 +124,18 @@ def load_specs(data: str, scenes: str, split: str, limit: int | None) -> list[Ep
     total = 0
     for scene in ds.scenes():
         shard = ds.load_scene(scene)
+        paths: dict[str, str] = {}
+        for ep in shard.episodes:  # a scene id outside the root refuses the file, whatever else is wrong
+            if ep.scene_id not in paths:
+                try:
+                    paths[ep.scene_id] = path_identity(resolve_scene_path(ep.scene_id, scenes))
+                except DatasetError as e:
+                    raise DatasetError(f"{ds.shard_path(scene)}: episode {ep.episode_id!r}: {e}") from None
         episodes, bad = usable_episodes(shard)
         total += len(shard.episodes)
         skipped.update(bad)
-        specs = []
-        for ep in episodes:
-            try:
-                path = path_identity(resolve_scene_path(ep.scene_id, scenes))
-            except DatasetError as e:
-                raise DatasetError(f"{ds.shard_path(scene)}: episode {ep.episode_id!r}: {e}") from None
-            specs.append(spec_from_episode(ep, goals_for(ep, shard.goals_by_category), path, split))
-        per_scene.append(specs)
+        per_scene.append([spec_from_episode(ep, goals_for(ep, shard.goals_by_category), paths[ep.scene_id], split)
+                          for ep in episodes])
     warn_skipped(f"{ds.content_dir}", skipped, total)
     out = [p[i] for i in range(max(map(len, per_scene), default=0)) for p in per_scene if i < len(p)]
     return out if limit is None else out[:limit]
@@ -155,7 +156,9 @@ def drop_off_map_starts(specs: list[EpisodeSpec], sim: SimConfig, workers: int =
     jobs = [{"scene": sc, "starts": [[float(x) for x in specs[i].start_position] for i in idx],
              "agent": to_dict(sim.agent), "nav": to_dict(sim.nav)} for sc, idx in sorted(by_scene.items())]
     bad: set[int] = set()
-    for res in run_jobs(off_map_starts_job, jobs, workers, executor):
+    # A pool costs seconds to start: worth it only when there are many scenes to load.
+    many = len(jobs) > 4
+    for res in run_jobs(off_map_starts_job, jobs, workers if many else 1, executor if many else "process"):
         idx = by_scene[res["scene"]]
         bad.update(idx[j] for j in res["bad"])
     warn_skipped(where or "episodes", Counter({"start_off_map": len(bad)}), len(specs))
