@@ -30,9 +30,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ovon.train.common import adhoc_specs, needed_texts, parse_seed_list, write_text_table  # noqa: E402
 from ovon.train.config import train_preset  # noqa: E402
+from ovon.train.episodes import adhoc_specs, parse_seed_list  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
+from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 
 
 def _stats(rows: list[dict], key: str) -> float | None:
@@ -66,7 +67,7 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
 def bench_bc(cfg, specs, root: Path, episodes: int) -> dict:
     from ovon.train import train
     from ovon.train.bc import record_shards
-    from ovon.train.common import text_table
+    from ovon.train.text import text_table
 
     shards = root / "bc_shards"
     table = text_table(cfg.encoder, needed_texts(specs), cfg.text_cache, write=False)

@@ -82,6 +82,10 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as e:  # noqa: BLE001 - last resort: still one line, marked as a bug
             if debug:
                 raise
+            vector = sys.modules.get("ovon.env.vector")
+            if vector is not None and isinstance(e, getattr(vector, "WorkerError", ())):
+                print(f"ovon: error: {_one_line(e)}", file=sys.stderr)  # an env's own one-line error
+                return 2
             print(f"ovon: internal error: {type(e).__name__}: {_one_line(e)[:300]} (a bug in ovon: please report it; "
                   "OVON_DEBUG=1 shows the traceback)", file=sys.stderr)
             return 3

@@ -35,6 +35,9 @@ class CameraConfig:
     min_depth: float = non_negative(0.5)
     max_depth: float = positive(5.0)
     backend: Literal["auto", "gl", "embree"] = "auto"
+    # Render the RGB channel. Off when no consumer reads it (oracle encoders need depth + semantic):
+    # saves the colour pass and its read-back. Depth and the semantic frame are always rendered.
+    rgb: bool = True
 
     rules: ClassVar = (less("min_depth", "max_depth"),)
 

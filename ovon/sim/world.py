@@ -8,8 +8,9 @@ from ovon.config.sim import SimConfig
 from ovon.scenes.model import Scene
 
 
-def load_scene_any(scene: str | Scene) -> Scene:
-    """A `Scene`, a path to an HM3DSem-layout scene (folder or file), or `procedural:<seed>`."""
+def load_scene_any(scene: str | Scene, up: str | None = None) -> Scene:
+    """A `Scene`, a path to a scene (HM3DSem folder or any of its files, or a bare .glb/.gltf/.ply/.obj),
+    or `procedural:<seed>`. `up` overrides the up axis of a scan or bare mesh (see `load_scene`)."""
     if isinstance(scene, Scene):
         return scene
     if scene.startswith("procedural:"):
@@ -22,7 +23,7 @@ def load_scene_any(scene: str | Scene) -> Scene:
         return generate_house(seed)
     from ovon.scenes.hm3dsem import load_scene
 
-    return load_scene(scene)
+    return load_scene(scene, up=up)
 
 
 @dataclass

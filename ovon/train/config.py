@@ -123,7 +123,10 @@ class TrainConfig:
     # Bookkeeping.
     seed: int = 0
     device: str = "auto"  # auto = cuda:<local rank> when available, else cpu
-    threads: int = 0  # torch threads in the trainer (0 = leave torch's default)
+    threads: int = 0  # torch threads of the learner's updates (0 = leave torch's default)
+    # torch threads while acting during rollouts: the env workers need the cores meanwhile, and an idle
+    # multi-threaded pool spins and steals their CPU (0 = same as `threads`)
+    rollout_threads: int = 1
     log_every: int = 1  # updates
     checkpoint_every: int = 50  # updates
     keep_checkpoints: int = 3  # numbered policy snapshots kept besides the latest
