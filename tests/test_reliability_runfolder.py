@@ -12,6 +12,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ovon.evaluate.harness import EvalConfig, evaluate
 from ovon.evaluate.results import REJECTED_FILE, read_records, record_key
@@ -168,3 +170,28 @@ def test_two_evaluations_on_one_folder_do_not_both_write(tiny_dataset, tiny_scen
     assert len(second.stderr.strip().splitlines()) == 1
     keys = [record_key(r) for r in read_records(out)]
     assert len(keys) == len(set(keys))
+
+
+# -- canonical order: the summary does not depend on the order in which workers finished ----------------
+def _record(i: int, split: str, seed: int) -> dict:
+    return {"split": split, "seed": seed, "scene": f"/s/{i % 3}.glb", "episode_id": str(i), "success": i % 3 == 0,
+            "spl": (i * 0.1234567) % 1, "soft_spl": (i * 0.7654321) % 1, "distance_to_goal": i * 0.1,
+            "steps": i, "collisions": i % 5, "failure": None if i % 3 == 0 else "stop_too_far"}
+
+
+RECORDS = [_record(i, sp, seed) for i in range(30) for sp in ("val_seen", "val_unseen") for seed in (0, 1, 2)]
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.permutations(RECORDS))
+def test_summary_and_file_bytes_do_not_depend_on_record_order(tmp_path_factory, order):
+    from ovon.evaluate.results import summarize, write_canonical
+
+    d = tmp_path_factory.mktemp("c")
+    write_canonical(d, order)
+    assert (d / "episodes.jsonl").read_bytes() == _CANON.setdefault("bytes", (d / "episodes.jsonl").read_bytes())
+    s = json.dumps(summarize(order), sort_keys=True)
+    assert s == _CANON.setdefault("summary", s)
+
+
+_CANON: dict = {}
