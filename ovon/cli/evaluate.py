@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
 
-from ovon.config.base import validate
+from ovon.config.base import ExistingDir, existing_dir, from_args, in_range, non_empty, non_negative, validate
 from ovon.config.sim import SimConfig
 from ovon.evaluate.harness import EvalConfig, apply_overrides, parse_noise
 
@@ -50,9 +51,9 @@ def register(sub) -> None:
     v.add_argument("--run", required=True)
     v.add_argument("--episode", required=True)
     v.add_argument("--split")
-    v.add_argument("--seed", type=int)
+    v.add_argument("--seed")
     v.add_argument("--scene", help="part of the scene path (episode ids are unique per scene only)")
-    v.add_argument("--fps", type=int, default=8)
+    v.add_argument("--fps", default=8)
     v.add_argument("--out", required=True)
     v.set_defaults(func=cmd_video)
 
@@ -144,11 +145,25 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+@dataclass(frozen=True)
+class ReportArgs:
+    runs: tuple[str, ...] = non_empty((), each=ExistingDir(), distinct=True, flag="RUNS")
+
+
+@dataclass(frozen=True)
+class VideoArgs:
+    run: str = existing_dir(flag="--run")
+    episode: str = non_empty("", flag="--episode")
+    seed: int | None = non_negative(None, flag="--seed")
+    fps: int = in_range(8, 1, 120, flag="--fps")
+
+
 def cmd_report(args) -> int:
     from ovon.reports.build import build_report
 
-    out = args.out or str(Path(args.runs[0]) / "report")
-    path = build_report(args.runs, out)
+    a = from_args(ReportArgs, args, runs=tuple(args.runs))
+    out = args.out or str(Path(a.runs[0]) / "report")
+    path = build_report(list(a.runs), out)
     print(path.read_text().split("## Failure breakdown")[0], end="")
     print(f"report: {path}")
     return 0
@@ -157,7 +172,7 @@ def cmd_report(args) -> int:
 def cmd_video(args) -> int:
     from ovon.reports.video import render_video
 
-    path = render_video(args.run, args.episode, args.out, split=args.split, seed=args.seed, fps=args.fps,
-                        scene=args.scene)
+    a = from_args(VideoArgs, args)
+    path = render_video(a.run, a.episode, args.out, split=args.split, seed=a.seed, fps=a.fps, scene=args.scene)
     print(f"video: {path}")
     return 0

@@ -169,6 +169,8 @@ class ExistingPath(Domain):
         return p.is_file() if self.kind == "file" else p.is_dir()
 
     def describe(self, noun: str) -> str:
+        if noun == "strings":  # an element of a list
+            return "existing files" if self.kind == "file" else "existing folders"
         what = "an existing file" if self.kind == "file" else "an existing folder"
         return what + (" (or empty for none)" if self.optional else "")
 

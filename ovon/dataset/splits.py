@@ -125,10 +125,13 @@ class CategorySplit:
 
 def load_category_split(path: str | Path) -> CategorySplit:
     path = Path(path)
+    fix = "fix: pass a categories.json written by `ovon dataset splits`"
     try:
-        doc = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise DatasetError(f"{path}: not valid JSON ({e})") from None
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
+        raise DatasetError(f"{path}: not valid JSON ({type(e).__name__}); {fix}") from None
+    if not isinstance(doc, dict):
+        raise DatasetError(f"{path}: expected a JSON object with train / val_seen_synonyms / val_unseen; {fix}")
     return CategorySplit.from_json(doc, source=str(path))
 
 

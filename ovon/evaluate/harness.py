@@ -81,6 +81,8 @@ def parse_noise(spec: str | None) -> NoiseConfig:
             except ValueError:
                 raise ConfigError(f"--noise {item!r}: multiplier {mult!r} is not a number; {fix}") from None
             cfg = dataclasses.replace(cfg, actuation=model, actuation_multiplier=k)
+            if not 0 <= k <= 100:
+                raise ConfigError(f"--noise {item!r}: multiplier {k:g} is outside [0, 100]; {fix}")
         elif name == "odometry" and not arg:
             cfg = dataclasses.replace(cfg, odometry=True)
         else:
