@@ -337,7 +337,7 @@ def test_evaluate_uses_the_camera_a_policy_was_trained_with(tmp_path) -> None:
 def test_expert_config_reaches_the_labelling_expert() -> None:
     """`--set frontier_expert.KEY=V` changes the expert that labels DAgger / BC states."""
     from ovon.config.base import ConfigError, build
-    from ovon.experts.rig import make_expert
+    from ovon.experts.factory import make_expert
     from ovon.train.config import TrainConfig, train_preset
     from ovon.train.run import expert_config
 

@@ -6,7 +6,8 @@ angle, step, FOV, success radius) comes from the episode's own sim/task config."
 from __future__ import annotations
 
 from ovon.experts import FrontierExpertConfig, ShortestPathExpertConfig
-from ovon.experts.rig import Embodiment, make_expert
+from ovon.experts.factory import make_expert
+from ovon.experts.rig import Embodiment
 
 
 class _ExpertAgent:

@@ -24,7 +24,7 @@ from ovon.scenes.model import Scene
 from ovon.sim.agent import STOP, Kinematics, Odometry
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState, Frame
-from ovon.sim.world import World, build_world
+from ovon.sim.world import World, acquire_world
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
 from ovon.task.setup import prepare_episode
 from ovon.task.tracker import EpisodeTracker
@@ -94,7 +94,7 @@ class ObjectNavEnv(gym.Env):
             if self._world is not None:
                 self._world.close()
             obj = self._scene_obj
-            self._world = build_world(obj if obj is not None and obj.scene_id == scene else scene, self.sim_cfg)
+            self._world = acquire_world(obj if obj is not None and obj.scene_id == scene else scene, self.sim_cfg)
         return self._world
 
     def _next_spec(self, options: dict | None) -> EpisodeSpec:

@@ -8,14 +8,12 @@ distance) is derived from the env's own sim/task config, so they cannot disagree
 
 from __future__ import annotations
 
-import math
-
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from ovon.env.privileged import privileged_of
-from ovon.experts.rig import make_expert
+from ovon.experts.factory import make_expert
 
 KEY = "expert_action"
 NO_LABEL = -1  # the observation after an episode's last step has no label
@@ -31,14 +29,14 @@ def inner_viewpoints(p, radius: float) -> list:
     if radius <= 0:
         return list(p.viewpoints)
     boxes = [(o.aabb_min, o.aabb_max) for o in p.world.scene.objects if o.id in p.goal_ids]
-    if not boxes:
+    if not boxes or not p.viewpoints:
         return list(p.viewpoints)
-
-    def box_distance(v) -> float:
-        x, z = float(v.position[0]), float(v.position[2])
-        return min(math.hypot(max(lo[0] - x, 0.0, x - hi[0]), max(lo[2] - z, 0.0, z - hi[2])) for lo, hi in boxes)
-
-    inner = [v for v in p.viewpoints if box_distance(v) <= radius]
+    lo = np.array([b[0] for b in boxes], np.float64)[:, [0, 2]]  # (B, 2) x, z
+    hi = np.array([b[1] for b in boxes], np.float64)[:, [0, 2]]
+    xz = np.array([v.position for v in p.viewpoints], np.float64)[:, None, [0, 2]]  # (V, 1, 2)
+    gap = np.maximum(np.maximum(lo - xz, 0.0), xz - hi)  # (V, B, 2) distance outside each box, per axis
+    near = np.hypot(gap[..., 0], gap[..., 1]).min(axis=1) <= radius
+    inner = [v for v, keep in zip(p.viewpoints, near) if keep]
     return inner or list(p.viewpoints)
 
 

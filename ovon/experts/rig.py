@@ -26,20 +26,3 @@ class Embodiment:
         sim, task = sim or SimConfig(), task or TaskConfig()
         return cls(float(sim.agent.turn_angle_deg), float(sim.agent.forward_step), float(sim.camera.hfov_deg),
                    float(task.success_distance))
-
-
-def make_expert(name: str, cfg=None, sim: SimConfig | None = None, task: TaskConfig | None = None):
-    """The expert named `name` ("frontier" | "shortest-path") with its config (None = defaults) and the
-    embodiment of `sim` / `task`."""
-    body = Embodiment.of(sim, task)
-    if name == "frontier":
-        from ovon.experts.config import FrontierExpertConfig
-        from ovon.experts.frontier_expert import FrontierExpert
-
-        return FrontierExpert(cfg or FrontierExpertConfig(), body)
-    if name == "shortest-path":
-        from ovon.experts.config import ShortestPathExpertConfig
-        from ovon.experts.shortest_path import ShortestPathExpert
-
-        return ShortestPathExpert(cfg or ShortestPathExpertConfig(), body)
-    raise ValueError(f"unknown expert {name!r}; valid: frontier, shortest-path")

@@ -26,15 +26,44 @@ def load_scene_any(scene: str | Scene, up: str | None = None) -> Scene:
     return load_scene(scene, up=up)
 
 
-@dataclass
+@dataclass(eq=False)
 class World:
     scene: Scene
     nav: object  # ovon.sim.navgrid.SceneNav
     renderer: object  # ovon.sim.types.Renderer
     key: str
+    _share: tuple | None = None  # key in the per-process table of `acquire_world`
 
     def close(self) -> None:
+        """Release this world (the last holder of a shared world closes its renderer)."""
+        if self._share is not None:
+            entry = _SHARED.get(self._share)
+            if entry is not None:
+                entry[1] -= 1
+                if entry[1] > 0:
+                    return
+                del _SHARED[self._share]
+            self._share = None
         self.renderer.close()
+
+
+# Envs hosted by one process (the vector env puts several in each worker) share a world per scene and
+# sim config: the scene, its navigability and the renderer's GPU buffers are loaded once. Rendering is
+# synchronous, so envs of one process never use the renderer at the same time.
+_SHARED: dict[tuple, list] = {}
+
+
+def acquire_world(scene: str | Scene, cfg: SimConfig) -> World:
+    """A world shared by every env of this process with the same scene and sim config; `close()` it
+    when done (reference counted)."""
+    key = (scene if isinstance(scene, str) else ("scene-object", id(scene)), repr(cfg))
+    entry = _SHARED.get(key)
+    if entry is None:
+        world = build_world(scene, cfg)
+        world._share = key
+        entry = _SHARED[key] = [world, 0]
+    entry[1] += 1
+    return entry[0]
 
 
 def build_world(scene: str | Scene, cfg: SimConfig) -> World:
