@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from ovon.cli.main import main as ovon
 from ovon.evaluate.harness import load_specs
 
-DEEP = "[" * 3000 + "]" * 3000
+DEEP = "[" * 600 + "]" * 600
 
 
 def run(argv: list[str], capsys) -> tuple[int, str, str]:
