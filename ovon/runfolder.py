@@ -351,6 +351,7 @@ class RunFolder:
         if self._lock is not None:
             self._lock.release()
             self._lock = None
+            atexit.unregister(self.close)
 
     def abandon_if_unused(self) -> None:
         """A new run that failed before writing anything leaves no identity behind (so a corrected re-run
