@@ -113,10 +113,17 @@ def test_readme_blocks_are_all_runnable_kinds():
         assert "..." not in shrink(code).replace('"..."', ""), f"placeholder in a README block:\n{code}"
 
 
+def test_readme_has_no_merge_leftovers():
+    text = README.read_text()
+    assert not re.search(r"^(<<<<<<<|=======|>>>>>>>)( |$)", text, flags=re.M)
+
+
 def test_readme_python_env_example_runs(tmp_path):
-    """The Gymnasium example (first lines of the Python block) runs as written, fast."""
+    """The Gymnasium example (the Python block's paragraphs up to the evaluation) runs as written, fast."""
     lang, code, _ = next(b for b in readme_blocks(README.read_text()) if "gym.make" in b[1])
-    head = code.split("\n\n")[0]
+    paragraphs = code.split("\n\n")
+    head = "\n\n".join(paragraphs[: next(i for i, p in enumerate(paragraphs) if "evaluate(" in p)])
+    assert "gym.make" in head
     script = tmp_path / "env_example.py"
     script.write_text(head)
     res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(tmp_path), capture_output=True,
