@@ -130,13 +130,15 @@ def test_ray_gives_the_same_bytes(tiny_dataset, tiny_scenes, tmp_path):
 
 
 # -- kill -9 at random moments, then re-run -------------------------------------------------------------
-def kill_and_resume(cmd: list[str], out: Path, delays: list[float], env: dict) -> list[int]:
-    """Start `cmd`, SIGKILL its whole process group after each delay, then let it finish; returns the pids
-    of every process that was alive in the group at a kill (all must be gone afterwards)."""
+def kill_and_resume(cmd: list[str], out: Path, progress, stops: list[int], env: dict) -> list[int]:
+    """Start `cmd` and SIGKILL its main process once `progress(out)` reaches each of `stops` (work on disk),
+    then let it finish; returns the pids of the workers alive at the kills (all must be gone afterwards)."""
     seen: list[int] = []
-    for delay in delays:
+    for stop in stops:
         p = subprocess.Popen(cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        time.sleep(delay)
+        deadline = time.time() + 600
+        while p.poll() is None and progress(out) < stop and time.time() < deadline:
+            time.sleep(0.02)
         seen += [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
                                                 text=True).stdout.split()]
         p.send_signal(signal.SIGKILL)  # the main process only: its workers must follow it
@@ -144,6 +146,15 @@ def kill_and_resume(cmd: list[str], out: Path, delays: list[float], env: dict) -
     res = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=1200)
     assert res.returncode == 0, res.stderr
     return seen
+
+
+def records_on_disk(out: Path) -> int:
+    f = out / "episodes.jsonl"
+    return f.read_bytes().count(b"\n") if f.exists() else 0
+
+
+def files_on_disk(out: Path) -> int:
+    return len(list(out.glob(".cache/goals/*.json.gz"))) + len(list(out.glob("*/content/*.json.gz")))
 
 
 def _env() -> dict:
@@ -158,7 +169,8 @@ def test_kill_9_during_evaluate_then_rerun_is_byte_identical(tiny_dataset, tiny_
            "--scenes", str(tiny_scenes), "--splits", "val_seen", "--seeds", "0,1", "--workers", "2",
            "--no-progress", "--out", str(out)]
     rng = random.Random(13)
-    workers = kill_and_resume(cmd, out, [rng.uniform(4.0, 10.0) for _ in range(2)], _env())
+    n = records_on_disk(ref)
+    workers = kill_and_resume(cmd, out, records_on_disk, sorted(rng.sample(range(1, n), 2)), _env())
     assert _wait_gone(workers) == []
     for name in OUTPUTS:
         assert (out / name).read_bytes() == (ref / name).read_bytes(), name
@@ -175,7 +187,8 @@ def test_kill_9_during_dataset_generate_then_rerun_is_byte_identical(tiny_scenes
                    check=True, capture_output=True)
     rng = random.Random(7)
     cmd = [sys.executable, "-m", "ovon.cli.main", *args, "--out", str(out)]
-    workers = kill_and_resume(cmd, out, [rng.uniform(8.0, 30.0) for _ in range(3)], _env())
+    n = files_on_disk(ref)
+    workers = kill_and_resume(cmd, out, files_on_disk, sorted(rng.sample(range(1, n), min(3, n - 1))), _env())
     assert _wait_gone(workers) == []
 
     def files(root: Path) -> dict[str, bytes]:  # the dataset (reports hold timings, .cache holds timings)

@@ -583,38 +583,51 @@ def _children_alive(pids: list[int]) -> list[int]:
     return alive
 
 
+def _progress(kind: str, out: Path) -> int:
+    """Work done so far: records written (evaluate), goal caches + shards written (generate)."""
+    if kind == "evaluate":
+        f = out / "episodes.jsonl"
+        return f.read_bytes().count(b"\n") if f.exists() else 0
+    return len(list(out.glob(".cache/goals/*.json.gz"))) + len(list(out.glob("*/content/*.json.gz")))
+
+
 def kill_round(kind: str, w: World, rnd: random.Random, index: int) -> Case:
+    """Kill the main process 1-3 times, each at a random moment: after a random time, or once a random
+    amount of work is on disk (so kills land before, during and near the end of the work)."""
     if kind == "evaluate":
         args = ["evaluate", "--agent", "frontier", "--data", str(w.data), "--scenes", str(w.scenes), "--splits",
                 "val_seen,val_unseen", "--seeds", "0,1", "--workers", "2", "--no-progress"]
         ref, files = w.work / "kill" / "eval_ref", ("episodes.jsonl", "summary.json", "table.md", "run_identity.json")
-        delays = [rnd.uniform(3.0, 14.0) for _ in range(rnd.randint(1, 3))]
     else:
         args = ["dataset", "generate", "--scenes", str(w.scenes), "--preset", "fast", "--split", "val_seen", "--split",
                 "val_unseen", "--set", "episodes_per_val_split=10", "--set", "viewpoints.render_size=48", "--set",
                 "viewpoints.max_viewpoints=4", "--workers", "2", "--no-progress"]
         ref, files = w.work / "kill" / "gen_ref", None
-        delays = [rnd.uniform(6.0, 35.0) for _ in range(rnd.randint(1, 2))]
     if not ref.exists():
         subprocess.run(ovon_cmd([*args, "--out", str(ref)]), env=env(), cwd=ROOT, check=True, capture_output=True)
+    total = _progress(kind, ref)
     out = w.work / "kill" / f"{kind}{index}"
     shutil.rmtree(out, ignore_errors=True)
     case = Case(f"kill-{kind}", [*args, "--out", str(out)], "ok")
     children: list[int] = []
     progress = []
     t0 = time.time()
-    for d in delays:
+    for _ in range(rnd.randint(1, 3)):
+        by_time = rnd.random() < 0.3
+        when = rnd.uniform(1.0, 12.0) if by_time else rnd.randint(1, max(1, total - 1))
         p = subprocess.Popen(ovon_cmd(case.argv), env=env(), cwd=ROOT, stdout=subprocess.DEVNULL,
                              stderr=subprocess.DEVNULL)
-        time.sleep(d)
+        start = time.time()
+        while p.poll() is None and (time.time() - start < when if by_time else _progress(kind, out) < when):
+            time.sleep(0.02)
         before = complete_records(snapshot(str(out)))
         children += [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
                                                     text=True).stdout.split()]
         p.send_signal(signal.SIGKILL)
         p.wait()
         after = complete_records(snapshot(str(out)))
-        progress.append(f"kill at {d:.1f}s: {len(after)} records"
-                        + (f", {len(list(out.rglob('*.json.gz')))} shards" if kind != "evaluate" else ""))
+        progress.append(f"kill at {time.time() - start:.1f}s with {_progress(kind, out)}/{total} "
+                        f"{'records' if kind == 'evaluate' else 'goal caches + shards'} done")
         if not before <= after:
             case.outcome, case.detail = "data_loss", "records lost at the kill"
             return case
