@@ -13,11 +13,12 @@ from ovon.config.base import ConfigError, build, from_dict, merge, validate, vio
 from ovon.config.dataset import GENERATION_PRESETS, GenerationConfig
 from ovon.config.sim import CameraConfig, SimConfig
 from ovon.config.task import TaskConfig
+from ovon.dataset.splits import SplitConfig
 from ovon.evaluate.harness import EvalConfig
 from ovon.models.config import ENCODER_PRESETS, POLICY_PRESETS, EncoderConfig, PolicyConfig
 
 # The configs whose domains this session owns (train/expert configs declare theirs with the same helpers).
-OWNED = (SimConfig, TaskConfig, GenerationConfig, EncoderConfig, PolicyConfig, EvalConfig)
+OWNED = (SimConfig, TaskConfig, GenerationConfig, EncoderConfig, PolicyConfig, EvalConfig, SplitConfig)
 # Fields whose type is their whole domain: any finite reward, a free-form kwargs mapping.
 FREE = {"RewardConfig": {"dense_success", "dense_slack", "sparse_success", "sparse_slack", "sparse_collision"},
         "EvalConfig": {"agent_kwargs"}}

@@ -16,6 +16,7 @@ from ovon.config.base import (
     OneOf,
     Pattern,
     constrained,
+    domain_of,
     existing_dir,
     existing_file,
     from_args,
@@ -23,8 +24,9 @@ from ovon.config.base import (
     non_empty,
     positive,
 )
+from ovon.dataset.splits import EPISODE_SPLITS as _SPLITS
+from ovon.dataset.splits import SplitConfig
 
-_SPLITS = ("train", "val_seen", "val_seen_synonyms", "val_unseen")
 SPLIT_NAME = Pattern(r"[A-Za-z0-9][A-Za-z0-9_.-]*", "split folder names (letters, digits, _ . -)")
 
 
@@ -40,10 +42,12 @@ class GenerateArgs:
 
 @dataclass(frozen=True)
 class SplitsArgs:
+    """The options of `ovon dataset splits`; the numbers share `SplitConfig`'s domains."""
+
     scenes: str = existing_dir("", optional=True, flag="--scenes")
-    seed: int = in_range(0, 0, 2**32 - 1, flag="--seed")
-    threshold: float = in_range(0.68, -1.0, 1.0, flag="--threshold")
-    holdout: float = in_range(0.25, 0.0, 1.0, lo_open=True, hi_open=True, flag="--holdout")
+    seed: int = constrained(0, domain_of(SplitConfig, "seed"), flag="--seed")
+    threshold: float = constrained(0.68, domain_of(SplitConfig, "similarity_threshold"), flag="--threshold")
+    holdout: float = constrained(0.25, domain_of(SplitConfig, "holdout_fraction"), flag="--holdout")
     out: str = non_empty("categories.json", flag="--out")
 
 

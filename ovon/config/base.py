@@ -217,6 +217,11 @@ def constrained(default: Any = MISSING, domain: Domain | None = None, *, default
     return dataclasses.field(default=default, metadata=meta)
 
 
+def domain_of(cls: type, name: str) -> Domain:
+    """The declared domain of field `name` of config `cls` (so an option that sets it shares it)."""
+    return {f.name: f for f in dataclasses.fields(cls)}[name].metadata["domain"]
+
+
 def positive(default: Any = MISSING, **kw: Any) -> Any:
     return constrained(default, Positive(), **kw)
 
