@@ -163,11 +163,17 @@ def _holder(path: Path) -> str:
         return "another process"
 
 
-class _Lock:
-    """Exclusive, non-blocking lock on `<folder>/.lock`."""
+class FileLock:
+    """Exclusive, non-blocking lock held through the file `path` (created when absent), with the holder's
+    pid, host, start time and command written in it. A second holder gets a RunFolderError naming the
+    first; a lock whose process died is recovered (flock: by the kernel; pid file: by a liveness check).
+    `release()` (or `with`) unlocks and removes the file. `RunFolder` holds one on `<folder>/.lock`; any
+    other "one writer at a time" (e.g. an experiment cell) can hold one on its own path."""
 
-    def __init__(self, folder: Path, what: str) -> None:
-        self.path = folder / LOCK_FILE
+    def __init__(self, path: str | Path, what: str = "--out") -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        folder = self.path.parent
         self.fd: int | None = None
         info = json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
                            "since": time.strftime("%Y-%m-%d %H:%M:%S"), "command": " ".join(sys.argv)[:500]})
@@ -230,6 +236,12 @@ class _Lock:
         os.close(self.fd)  # closing releases the flock
         self.fd = None
 
+    def __enter__(self) -> FileLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
 
 # ----------------------------------------------------------------------------------------------------
 # the run folder
@@ -243,7 +255,7 @@ class RunFolder:
     kind: str
     identity: dict[str, Any]
     resumed: bool
-    _lock: _Lock | None = field(default=None, repr=False)
+    _lock: FileLock | None = field(default=None, repr=False)
     _created: bool = field(default=False, repr=False)
 
     @classmethod
@@ -276,7 +288,7 @@ class RunFolder:
         except OSError as e:
             raise RunFolderError(f"{what} {path}: cannot create the folder ({e.strerror}); fix: choose a "
                                  "writable folder") from None
-        lock = _Lock(path, what)
+        lock = FileLock(path / LOCK_FILE, what)
         try:
             # Keys that may change are not part of what the folder is: not stored, not compared.
             may = tuple(may_change)

@@ -20,7 +20,8 @@ from ovon.models.config import ENCODER_PRESETS, POLICY_PRESETS, EncoderConfig, P
 # The configs whose domains this session owns (train/expert configs declare theirs with the same helpers).
 OWNED = (SimConfig, TaskConfig, GenerationConfig, EncoderConfig, PolicyConfig, EvalConfig, SplitConfig)
 # Fields whose type is their whole domain: any finite reward, a free-form kwargs mapping.
-FREE = {"RewardConfig": {"dense_success", "dense_slack", "sparse_success", "sparse_slack", "sparse_collision"},
+FREE = {"RewardConfig": {"dense_success", "dense_slack", "sparse_success", "sparse_slack", "sparse_collision",
+                         "dense_failed_stop", "dense_coverage"},
         "EvalConfig": {"agent_kwargs"}}
 
 

@@ -195,3 +195,13 @@ def test_summary_and_file_bytes_do_not_depend_on_record_order(tmp_path_factory, 
 
 
 _CANON: dict = {}
+
+
+def test_file_lock_alone(tmp_path):
+    from ovon.runfolder import FileLock
+
+    with FileLock(tmp_path / "locks" / "cell.lock", "--only"):
+        with pytest.raises(RunFolderError, match="in use by another ovon process"):
+            FileLock(tmp_path / "locks" / "cell.lock")
+    assert not (tmp_path / "locks" / "cell.lock").exists()
+    FileLock(tmp_path / "locks" / "cell.lock").release()

@@ -14,7 +14,7 @@ import os
 import sys
 import warnings
 
-GROUPS = ["scenes", "sim", "dataset", "evaluate", "train", "demo"]
+GROUPS = ["scenes", "sim", "dataset", "evaluate", "train", "demo", "experiment"]
 
 
 class OneLineParser(argparse.ArgumentParser):

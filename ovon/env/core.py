@@ -121,13 +121,13 @@ class ObjectNavEnv(gym.Env):
         if len(spec.goal_category) > MAX_GOAL_LEN:
             raise ValueError(f"goal text longer than {MAX_GOAL_LEN} characters: {spec.goal_category!r}")
         world = self._world_for(spec.scene)
-        setup = prepare_episode(world, spec, self.np_random, self.task_cfg)
+        setup = prepare_episode(world, spec, self.np_random, self.task_cfg, self.sim_cfg.camera.hfov_deg)
         self._state, self._grid, self._field = setup.state, setup.grid, setup.goal_field
         self._viewpoints, self._tracker = setup.viewpoints, setup.tracker
         self._kin = Kinematics(self._grid, self.sim_cfg.agent, self._actuation)
         self.spec_episode = spec
         self._frame = self._render()
-        self._tracker.reset(self._state.position, self._frame.semantic)
+        self._tracker.reset(self._state.position, self._frame.semantic, self._state.yaw)
         odo = self._odometry.reset(self._state)
         return self._obs(odo), {"episode_id": spec.episode_id}
 
@@ -159,7 +159,8 @@ class ObjectNavEnv(gym.Env):
         result = self._kin.step(self._state, action, self.np_random)
         self._state = result.state
         self._frame = self._render()
-        self._tracker.update(self._state.position, action == STOP, result.collided, self._frame.semantic)
+        self._tracker.update(self._state.position, action == STOP, result.collided, self._frame.semantic,
+                             self._state.yaw)
         odo = self._odometry.update(self._state, self.np_random)
         reward = float(self._tracker.reward())
         terminated = action == STOP

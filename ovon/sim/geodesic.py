@@ -26,7 +26,7 @@ from ovon.sim.navgrid import NavGrid, SceneNav
 
 MAX_SNAP = 0.5  # m: goals farther than this from any navigable cell of the grid are ignored
 _SEED_RADIUS = 3  # cells: window around a goal where the level set is the exact Euclidean distance
-_CACHE_SIZE = 32
+_CACHE_SIZE = 256  # fields per process (a 400x400 field is 0.6 MB); training resets revisit goal sets
 _CACHE: OrderedDict[tuple, DistanceField] = OrderedDict()
 
 

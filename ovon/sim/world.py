@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 from ovon.config.sim import SimConfig
@@ -42,8 +43,15 @@ class World:
                 entry[1] -= 1
                 if entry[1] > 0:
                     return
+                # unused now: keep it for a while (envs that sample scenes come back to them)
+                _IDLE[self._share] = entry
+                _IDLE.move_to_end(self._share)
                 del _SHARED[self._share]
-            self._share = None
+                while len(_IDLE) > KEEP_IDLE_WORLDS:
+                    _, (old, _) = _IDLE.popitem(last=False)
+                    old._share = None
+                    old.renderer.close()
+                return
         self.renderer.close()
 
 
@@ -51,6 +59,8 @@ class World:
 # sim config: the scene, its navigability and the renderer's GPU buffers are loaded once. Rendering is
 # synchronous, so envs of one process never use the renderer at the same time.
 _SHARED: dict[tuple, list] = {}
+_IDLE: OrderedDict[tuple, list] = OrderedDict()  # released worlds kept for reuse, least recent first
+KEEP_IDLE_WORLDS = 8  # per process; a procedural house costs a few tens of MB
 
 
 def acquire_world(scene: str | Scene, cfg: SimConfig) -> World:
@@ -58,6 +68,8 @@ def acquire_world(scene: str | Scene, cfg: SimConfig) -> World:
     when done (reference counted)."""
     key = (scene if isinstance(scene, str) else ("scene-object", id(scene)), repr(cfg))
     entry = _SHARED.get(key)
+    if entry is None and key in _IDLE:
+        entry = _SHARED[key] = _IDLE.pop(key)
     if entry is None:
         world = build_world(scene, cfg)
         world._share = key

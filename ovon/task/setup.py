@@ -34,10 +34,12 @@ class EpisodeSetup:
     tracker: EpisodeTracker  # reset by the env once the first frame is rendered
 
 
-def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig) -> EpisodeSetup:
+def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig,
+                    fov_deg: float = 42.0) -> EpisodeSetup:
     """Goal instances, viewpoints (the episode's own, or navigable points within 1 m of the goals for
     ad-hoc episodes), the goal distance field, and the start (the episode's, or a seeded random one
-    connected to the goals). Raises ValueError when the episode cannot be set up in this world."""
+    connected to the goals). `fov_deg` is the camera's (for the exploration reward). Raises ValueError when
+    the episode cannot be set up in this world."""
     objs = goal_instances(world.scene, spec)
     if spec.start_position is not None:
         start_pos = np.asarray(spec.start_position, dtype=np.float64)
@@ -68,8 +70,13 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
         start_pos = _random_reachable_start(grid, field, rng, task.success_distance)
     yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
     goal_ids = frozenset(o.id for o in objs)
+    coverage = None
+    if task.reward.kind == "dense" and task.reward.dense_coverage != 0.0:
+        from ovon.task.coverage import Coverage
+
+        coverage = Coverage(grid, fov_deg, task.reward.coverage_range_m)
     tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=goal_ids, cfg=task,
-                             distractors=distractors(world.scene, spec.goal_categories))
+                             distractors=distractors(world.scene, spec.goal_categories), coverage=coverage)
     state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
     return EpisodeSetup(state, grid, field, list(viewpoints), goal_ids, tracker)
 

@@ -64,9 +64,13 @@ class EpisodeTracker:
     goal_ids: frozenset[int]
     cfg: TaskConfig = field(default_factory=TaskConfig)
     distractors: list[Distractor] = field(default_factory=list)
+    coverage: object = None  # ovon.task.coverage.Coverage when the reward has an exploration term
 
-    def reset(self, position: np.ndarray, semantic: np.ndarray | None = None) -> None:
+    def reset(self, position: np.ndarray, semantic: np.ndarray | None = None, yaw: float | None = None) -> None:
         self.position = np.asarray(position, dtype=np.float64).copy()
+        self.new_area = 0.0
+        if self.coverage is not None and yaw is not None:
+            self.coverage.reset(self.position, yaw)
         self.d0 = float(self.distance_fn(self.position))
         self.distance = self.d0
         self.prev_distance = self.d0
@@ -100,10 +104,14 @@ class EpisodeTracker:
                 self.goal_seen = True
 
     def update(
-        self, position: np.ndarray, stop: bool, collided: bool, semantic: np.ndarray | None = None
+        self, position: np.ndarray, stop: bool, collided: bool, semantic: np.ndarray | None = None,
+        yaw: float | None = None,
     ) -> None:
-        """Record one step: the action taken (STOP or not) and the resulting true position."""
+        """Record one step: the action taken (STOP or not) and the resulting true pose."""
         position = np.asarray(position, dtype=np.float64)
+        self.new_area = 0.0
+        if self.coverage is not None and yaw is not None:
+            self.new_area = self.coverage.update(position, yaw)
         self.path_length += float(np.linalg.norm(position - self.position))
         self.position = position.copy()
         self.steps += 1
@@ -135,7 +143,8 @@ class EpisodeTracker:
             delta = self.distance - self.prev_distance
             if not math.isfinite(delta):
                 delta = 0.0
-            return -delta + r.dense_slack
+            failed_stop = r.dense_failed_stop if self.called_stop else 0.0
+            return -delta + r.dense_slack + failed_stop + r.dense_coverage * self.new_area
         if r.kind == "sparse":
             collision = r.sparse_collision if self.last_collided else 0.0
             return (r.sparse_success if self.success else 0.0) + r.sparse_slack + collision

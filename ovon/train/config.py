@@ -172,6 +172,9 @@ def _cpu_small() -> TrainConfig:
         dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=200, buffer_rollouts=300, grad_steps=8,
                             sample_rollouts=4),
         checkpoint_every=50,
+        # One learner thread: on 2 cores a second torch thread only helps while nothing else runs, and
+        # an idle multi-threaded pool spinning next to the env workers slows everything 3-4x.
+        threads=1,
     )
 
 

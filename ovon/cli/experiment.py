@@ -1,0 +1,112 @@
+"""`ovon experiment`: the paper's experiments (tables, figures) as one resumable command each."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("experiment", help="run the paper's experiments (main, trajectories, memory, noise, failures)")
+    s = p.add_subparsers(dest="experiment_command", required=True)
+
+    ls = s.add_parser("list", help="the built-in experiments and scales")
+    ls.set_defaults(func=cmd_list)
+
+    r = s.add_parser("run", help="prepare data, train what is missing, evaluate, write the report; resumable")
+    _common(r)
+    r.add_argument("--scale", required=True, help="tiny | cpu | paper (scales.yaml)")
+    r.add_argument("--shard", help="i/n (0-based): take shard i of n; shards are whole dependency chains")
+    r.add_argument("--only", help="comma-separated cells (NAME, train:NAME or eval:NAME), with what they need")
+    r.add_argument("--redo", help="comma-separated cells to recompute, with what depends on them (old folders are "
+                                  "kept as <folder>.old-N)")
+    r.add_argument("--dry-run", action="store_true", help="print each cell's status and exact command; run nothing")
+    r.add_argument("--no-wait", action="store_true",
+                   help="leave cells another process is running (and what needs them) instead of waiting")
+    r.add_argument("--no-report", action="store_true", help="do not write <root>/<scale>/reports/<name>/")
+    r.set_defaults(func=cmd_run)
+
+    rep = s.add_parser("report", help="markdown + JSON + figures: the paper's numbers beside ours")
+    _common(rep)
+    rep.add_argument("--scale", help="tiny | cpu | paper (default: the only scale under --root)")
+    rep.add_argument("--out", help="report folder (default: <root>/<scale>/reports/<name>)")
+    rep.set_defaults(func=cmd_report)
+
+
+def _common(p) -> None:
+    p.add_argument("name", help="experiment: main | trajectories | memory | noise | failures, a comma-separated "
+                                "list, all, or the path of an experiment .yaml")
+    p.add_argument("--root", required=True, help="run root: data, cells, logs and reports go to <root>/<scale>/")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="scale override, e.g. evaluate.episodes=50, data.episodes=PATH, train.nproc_per_node=4")
+
+
+def _experiments(name: str) -> list:
+    from ovon.experiments import experiment_names, load_experiment
+
+    names = experiment_names() if name == "all" else [n.strip() for n in name.split(",") if n.strip()]
+    return [load_experiment(n) for n in names]
+
+
+def _plan(args, scale: str):
+    from ovon.experiments import resolve
+
+    return resolve(_experiments(args.name), scale, args.root, args.set)
+
+
+def _csv(text: str | None) -> list[str]:
+    return [x.strip() for x in (text or "").split(",") if x.strip()]
+
+
+def cmd_list(args) -> int:
+    from ovon.experiments import experiment_names, load_catalogue, load_experiment
+
+    for n in experiment_names():
+        exp = load_experiment(n)
+        print(f"{n:<14} {exp.title} - {exp.paper_ref}")
+    for name, sc in load_catalogue().scales.items():
+        print(f"scale {name:<8} {sc.description}")
+    return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def cmd_run(args) -> int:
+    from ovon.experiments import parse_shard, run
+
+    plan = _plan(args, args.scale)
+    shard = parse_shard(args.shard)
+    try:
+        signal.signal(signal.SIGTERM, _interrupt)  # a terminated runner stops its cell's command first
+    except ValueError:  # not the main thread
+        pass
+    try:
+        result = run(plan, only=_csv(args.only) or None, shard=shard, redo_cells=_csv(args.redo),
+                     dry_run=args.dry_run, wait=not args.no_wait, write_report=not args.no_report)
+    except KeyboardInterrupt:
+        print("interrupted: re-run the same command to resume")
+        return 130
+    return 0 if result.ok else 1
+
+
+def cmd_report(args) -> int:
+    from ovon.experiments import build_report
+
+    scale = args.scale or _only_scale(Path(args.root))
+    plan = _plan(args, scale)
+    out = args.out or plan.base / "reports" / plan.names
+    path = build_report(plan, out)
+    print(f"report: {path}")
+    return 0
+
+
+def _only_scale(root: Path) -> str:
+    from ovon.experiments import load_catalogue
+
+    found = [s for s in load_catalogue().scales if (root / s / "cells").is_dir()]
+    if len(found) != 1:
+        raise ValueError(f"--root {root} holds runs of scale(s) {found or 'none'}; fix: pass --scale "
+                         "(tiny | cpu | paper)")
+    return found[0]

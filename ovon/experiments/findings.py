@@ -1,0 +1,89 @@
+"""The paper's findings as rules over table entries, judged on our numbers and on the paper's own.
+
+Why judge the paper's numbers too: it checks the rule (a rule that fails on the paper's table does not
+state the paper's finding), and it shows beside our verdict what the paper found. Numbers are means over
+seeds in % points; a verdict is "within noise" when a deciding gap is smaller than the two stds summed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from ovon.experiments.definitions import Check, Finding
+
+Value = tuple[float, float]  # (mean, std) in %
+Lookup = Callable[[str, str], Value | None]  # (ref, metric) -> value, None when not run
+
+RULE_NOTE = ("means over evaluation seeds, in % points; 'within noise' where a deciding gap is smaller than the sum "
+             "of the two standard deviations")
+
+
+def rule_text(chk: Check) -> str:
+    m = chk.metric.upper()
+    if chk.kind == "best":
+        return f"{m} of {chk.target} > {m} of each of {', '.join(chk.others)}"
+    if chk.kind == "greater":
+        return "; ".join(f"{m} of {a} > {b}" for a, b in chk.pairs)
+    if chk.kind == "flat":
+        return f"max - min of {m} over {', '.join(chk.refs)} <= {chk.tolerance:g}"
+    if chk.kind == "drop":
+        return "; ".join(f"{m} of {a} - {b} >= {chk.tolerance:g}" for a, b in chk.pairs)
+    drop_a = ", ".join(f"{a} -> {b}" for a, b in chk.pairs)
+    drop_b = ", ".join(f"{a} -> {b}" for a, b in chk.against)
+    return f"mean {m} drop over ({drop_a}) < mean {m} drop over ({drop_b})"
+
+
+def _gaps(pairs: list[tuple[Value, Value]]) -> tuple[bool, bool, list[float]]:
+    gaps = [a[0] - b[0] for a, b in pairs]
+    holds = all(g > 0 for g in gaps)
+    noisy = any(abs(a[0] - b[0]) < a[1] + b[1] for a, b in pairs)
+    return holds, noisy, gaps
+
+
+def judge_check(chk: Check, look: Lookup) -> dict:
+    """{"verdict": holds | does not hold | not run, "within_noise": bool, "numbers": text}."""
+    refs = {r for r in (chk.target, *chk.others, *chk.refs, *(x for p in (*chk.pairs, *chk.against) for x in p)) if r}
+    values = {r: look(r, chk.metric) for r in refs}
+    missing = sorted(r for r, v in values.items() if v is None)
+    if missing:
+        return {"verdict": "not run", "within_noise": False, "numbers": f"missing: {', '.join(missing)}"}
+    v = {r: val for r, val in values.items() if val is not None}
+
+    def show(r: str) -> str:
+        return f"{r} {v[r][0]:.1f}"
+
+    if chk.kind in ("best", "greater"):
+        pairs = [(chk.target, o) for o in chk.others] if chk.kind == "best" else list(chk.pairs)
+        holds, noisy, _ = _gaps([(v[a], v[b]) for a, b in pairs])
+        numbers = "; ".join(f"{show(a)} vs {show(b)}" for a, b in pairs)
+    elif chk.kind == "flat":
+        means = [v[r][0] for r in chk.refs]
+        spread = max(means) - min(means)
+        holds = spread <= chk.tolerance
+        noisy = abs(spread - chk.tolerance) < max(v[r][1] for r in chk.refs) * 2
+        numbers = ", ".join(show(r) for r in chk.refs) + f" (spread {spread:.1f})"
+    elif chk.kind == "drop":
+        drops = [(v[a][0] - v[b][0], v[a][1] + v[b][1]) for a, b in chk.pairs]
+        holds = all(d >= chk.tolerance for d, _ in drops)
+        noisy = any(abs(d - chk.tolerance) < s for d, s in drops)
+        numbers = "; ".join(f"{show(a)} -> {v[b][0]:.1f} (drop {v[a][0] - v[b][0]:.1f})" for a, b in chk.pairs)
+    else:  # smaller_drop
+        da = [v[a][0] - v[b][0] for a, b in chk.pairs]
+        db = [v[a][0] - v[b][0] for a, b in chk.against]
+        ma, mb = sum(da) / len(da), sum(db) / len(db)
+        sa = max(v[a][1] + v[b][1] for a, b in chk.pairs)
+        sb = max(v[a][1] + v[b][1] for a, b in chk.against)
+        holds = ma < mb
+        noisy = abs(mb - ma) < sa + sb
+        each_a, each_b = ", ".join(f"{d:.1f}" for d in da), ", ".join(f"{d:.1f}" for d in db)
+        numbers = f"mean drop {ma:.1f} ({each_a}) vs {mb:.1f} ({each_b})"
+    return {"verdict": "holds" if holds else "does not hold", "within_noise": bool(noisy), "numbers": numbers}
+
+
+def judge(finding: Finding, look: Lookup) -> dict:
+    """A finding holds when every check holds; "not run" when any check lacks numbers."""
+    checks = [{"rule": rule_text(c), **judge_check(c, look)} for c in finding.checks]
+    verdicts = {c["verdict"] for c in checks}
+    verdict = "not run" if "not run" in verdicts else ("does not hold" if "does not hold" in verdicts else "holds")
+    noisy = verdict != "not run" and any(c["within_noise"] for c in checks)
+    return {"verdict": verdict, "within_noise": noisy, "checks": checks}

@@ -1,0 +1,329 @@
+"""The experiment report: the paper's number beside ours in every cell, the findings, the figures.
+
+`build_report(plan, out)` writes `report.md`, `report.json` and PNG figures under `out/`. Ours are
+means ± std over evaluation seeds of finished evaluation cells only; a cell that did not finish shows
+as "not run" with the reason (never as a zero). Row setups name the perception or detection each agent
+used ("oracle perception", "oracle detection"), taken from the cells' resolved configs.
+"""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+from typing import Any
+
+from ovon.atomic import atomic_write_text, write_json
+from ovon.experiments.definitions import Experiment, paper_numbers, parse_ref, row_eval
+from ovon.experiments.findings import RULE_NOTE, judge
+from ovon.experiments.plan import PERCEPTION, Cell, Plan, display
+from ovon.experiments.state import Status, plan_status, read_record
+
+
+# ----- what the cells hold ---------------------------------------------------------------------------
+def _done_seeds(record: dict | None) -> set[int] | None:
+    """The seeds of the command that last finished the cell (None: any)."""
+    for cmd in (record or {}).get("commands") or []:
+        toks = shlex.split(cmd)
+        if "--seeds" in toks:
+            return {int(s) for s in toks[toks.index("--seeds") + 1].split(",") if s}
+    return None
+
+
+def eval_records(plan: Plan, cell: Cell) -> list[dict]:
+    """Episode records of a finished evaluation cell, for its splits and finished seeds."""
+    from ovon.evaluate.results import read_records
+
+    seeds = _done_seeds(read_record(plan, cell))
+    splits = set(cell.eval_cell.splits) if cell.eval_cell else None
+    return [r for r in read_records(cell.folder)
+            if (seeds is None or int(r["seed"]) in seeds) and (splits is None or r["split"] in splits)]
+
+
+def setup_label(plan: Plan, cell: Cell) -> str:
+    """What the agent of an evaluation cell perceives with, and its noise, in words."""
+    ec = cell.eval_cell
+    assert ec is not None
+    if ec.agent == "policy" and ec.checkpoint:
+        image = plan.cells[f"train:{ec.checkpoint}"].train_cfg.encoder.image
+        label = PERCEPTION.get(image, image)
+    else:
+        label = _describe_agent(ec.agent, plan.cells, cell)
+    return label + (f"; noise: {ec.noise.replace(',', ', ')}" if ec.noise else "")
+
+
+def _describe_agent(agent: str, cells: dict, cell: Cell) -> str:
+    """The agent's own description (`describe(**agent_args)`, e.g. "VLFM, oracle detection, ...")."""
+    from ovon.agents import load_agent_class
+
+    ec = cell.eval_cell
+    args = _agent_args(cell)
+    if ec.checkpoint:
+        args.setdefault("checkpoint", str(cells[f"train:{ec.checkpoint}"].folder / "policy.pt"))
+    try:
+        describe = getattr(load_agent_class(agent), "describe", None)
+        if callable(describe):
+            text = str(describe(**args))
+            if ec.checkpoint and "perception" not in text:
+                image = cells[f"train:{ec.checkpoint}"].train_cfg.encoder.image
+                text += f" (policy: {PERCEPTION.get(image, image)})"
+            return text
+    except Exception:  # noqa: BLE001 - a report renders even when an agent's package is missing or broken
+        pass
+    shown = {k: v for k, v in args.items() if k != "checkpoint"}
+    return f"agent {agent}, " + (", ".join(f"{k}={v}" for k, v in sorted(shown.items())) or "defaults")
+
+
+def _agent_args(cell: Cell) -> dict[str, Any]:
+    import yaml
+
+    argv = cell.commands[0]
+    out = {}
+    for i, a in enumerate(argv):
+        if a == "--agent-arg" and i + 1 < len(argv):
+            k, _, v = argv[i + 1].partition("=")
+            out[k] = yaml.safe_load(v)
+    return out
+
+
+# ----- collection ------------------------------------------------------------------------------------
+def _pct(entry: dict, metric: str) -> tuple[float, float]:
+    return 100.0 * entry[metric]["mean"], 100.0 * entry[metric]["std"]
+
+
+def collect(plan: Plan) -> dict:
+    """Everything the report shows, as JSON-able data."""
+    from ovon.evaluate.results import summarize
+
+    statuses = plan_status(plan)
+    evals: dict[str, dict] = {}
+    for cid, cell in plan.cells.items():
+        if cell.kind != "eval":
+            continue
+        st = statuses[cid]
+        info: dict[str, Any] = {"status": st.state if st.state == "done" else str(st), "setup": setup_label(plan, cell),
+                                "summary": None}
+        if st.state == "done":
+            records = eval_records(plan, cell)
+            info["summary"] = summarize(records)
+            info["records"] = records
+        evals[cell.name] = info
+    out = {"experiments": {}, "scale": plan.scale.name, "scale_description": plan.scale.description,
+           "root": str(plan.root), "cells": _cells_info(plan, statuses)}
+    for exp in plan.experiments:
+        out["experiments"][exp.name] = experiment_results(exp, evals)
+    for info in evals.values():
+        info.pop("records", None)
+    out["evaluations"] = evals
+    return out
+
+
+def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
+    """An experiment's table, figures and findings from `evals` (evaluation cell -> {"summary", "status",
+    "setup", "records"}); findings are judged on ours and on the paper's numbers."""
+    from ovon.reports.compare import failure_breakdown
+
+    res: dict[str, Any] = {"title": exp.title, "paper_ref": exp.paper_ref, "description": exp.description}
+    entries: dict[tuple[str, str], dict] = {}
+    if exp.table is not None:
+        rows = []
+        for row in exp.table.rows:
+            cells = {}
+            for col in exp.table.columns:
+                name = row_eval(row, col.name)
+                ev = evals[name]
+                summ = (ev["summary"] or {}).get(col.split)
+                ours = None
+                if summ is not None:
+                    ours = {m: _pct(summ, m) for m in ("sr", "spl")}
+                    ours["episodes"] = summ["episodes"]
+                    ours["seeds"] = len(summ["seeds"])
+                entry = {"eval": name, "split": col.split, "ours": ours,
+                         "status": ev["status"] if ours is None else "done",
+                         "paper": paper_numbers(row, col.name, exp.source)}
+                cells[col.name] = entry
+                entries[(row.name, col.name)] = entry
+            setups = list(dict.fromkeys(evals[row_eval(row, c.name)]["setup"] for c in exp.table.columns))
+            rows.append({"name": row.name, "setup": "; ".join(setups), "cells": cells})
+        res["table"] = {"caption": exp.table.caption, "columns": [c.name for c in exp.table.columns], "rows": rows}
+    figures = []
+    for fig in exp.figures:
+        ev = evals[fig.eval]
+        recs = ev.get("records")
+        fb = failure_breakdown(recs) if recs else {}
+        groups = []
+        for g in fig.groups:
+            ours = {s: 100.0 * sum(fb[s][lb] for lb in g.labels) for s in fig.splits if s in fb} if fb else None
+            groups.append({"name": g.name, "color": g.color, "labels": list(g.labels), "ours": ours,
+                           "paper": dict(zip(fig.splits, g.paper)) if g.paper else None,
+                           "paper_range": list(g.paper_range) or None})
+        success = {s: 100.0 * fb[s]["success"] for s in fig.splits if s in fb} if fb else None
+        figures.append({"name": fig.name, "caption": fig.caption, "eval": fig.eval, "splits": list(fig.splits),
+                        "setup": ev["setup"], "status": ev["status"], "groups": groups, "success": success})
+    res["figures"] = figures
+
+    def look(source: str):
+        def lookup(ref: str, metric: str):
+            e = entries[parse_ref(ref, exp.source)]
+            if source == "ours":
+                return e["ours"][metric] if e["ours"] else None
+            p = e["paper"]
+            return (p[metric], p[f"{metric}_std"] or 0.0) if p else None
+        return lookup
+
+    res["findings"] = [{"id": f.id, "claim": f.claim, "note": f.note, "ours": judge(f, look("ours")),
+                        "paper": judge(f, look("paper"))} for f in exp.findings]
+    return res
+
+
+def _cells_info(plan: Plan, statuses: dict[str, Status]) -> dict:
+    from ovon.experiments.state import last_update
+
+    out = {}
+    for cid, cell in plan.cells.items():
+        rec = read_record(plan, cell) or {}
+        info = {"status": statuses[cid].state, "detail": statuses[cid].detail,
+                "commands": [display(cell, argv) for argv in cell.commands],
+                "wall_min": round(float(rec.get("wall_s", 0.0)) / 60, 1), "attempts": rec.get("attempts", 0),
+                "code": rec.get("code", "")}
+        if cell.kind == "train":
+            info["updates"] = last_update(cell.folder)
+            info["planned_updates"] = cell.total
+        out[cid] = info
+    return out
+
+
+# ----- markdown --------------------------------------------------------------------------------------
+def fmt(value: tuple[float, float] | None) -> str:
+    return "–" if value is None else f"{value[0]:.1f} ± {value[1]:.1f}"
+
+
+def fmt_paper(p: dict | None, metric: str) -> str:
+    if p is None:
+        return "–"
+    std = p[f"{metric}_std"]
+    return f"{p[metric]:.1f}" + (f" ± {std:.1f}" if std is not None else "")
+
+
+def table_markdown(table: dict) -> list[str]:
+    cols = table["columns"]
+    head = "| method | ours: setup | " + " | ".join(f"{c} SR | {c} SPL" for c in cols) + " |"
+    lines = [head, "|---|---|" + "---|---|" * len(cols)]
+    notes: dict[str, str] = {}
+    for row in table["rows"]:
+        cells = []
+        for c in cols:
+            e = row["cells"][c]
+            for m in ("sr", "spl"):
+                paper = fmt_paper(e["paper"], m)
+                if e["ours"] is None:
+                    cells.append(f"not run (paper {paper})")
+                    notes.setdefault(e["eval"], e["status"])
+                else:
+                    cells.append(f"**{fmt(e['ours'][m])}** (paper {paper})")
+        lines.append(f"| {row['name']} | {row['setup']} | " + " | ".join(cells) + " |")
+    if notes:
+        lines.append("")
+        lines += [f"- `{k}` not run: {v}" for k, v in notes.items()]
+    counts = {(e["ours"]["episodes"], e["ours"]["seeds"]) for r in table["rows"] for e in r["cells"].values()
+              if e["ours"]}
+    if counts:
+        lines.append("")
+        lines.append("Ours: " + ", ".join(f"{n} episodes over {s} seeds" for n, s in sorted(counts))
+                     + " per entry; mean ± std over seeds. Paper: as printed (3 seeds).")
+    return lines
+
+
+def findings_markdown(findings: list[dict]) -> list[str]:
+    lines = []
+    for f in findings:
+        ours, paper = f["ours"], f["paper"]
+        verdict = ours["verdict"] + (" (within noise)" if ours["within_noise"] else "")
+        lines.append(f"- **({f['id']}) {f['claim']}**: here **{verdict}**; paper: {paper['verdict']}.")
+        for c in ours["checks"]:
+            lines.append(f"  - rule: {c['rule']}; ours: {c['numbers']}")
+        if f["note"]:
+            lines.append(f"  - note: {f['note']}")
+    return lines
+
+
+def markdown(data: dict, figures: dict[str, list[str]]) -> str:
+    parts = [f"# Experiments at scale `{data['scale']}`", "", data["scale_description"], "",
+             "Each entry: **ours** (mean ± std over evaluation seeds) and the paper's number. A cell that did "
+             "not finish shows as *not run*.", ""]
+    all_findings = []
+    for name, exp in data["experiments"].items():
+        parts += [f"## {exp['title']} (`{name}`)", "", f"Paper: {exp['paper_ref']}. {exp['description']}", ""]
+        if "table" in exp:
+            parts += [f"{exp['table']['caption']}:", "", *table_markdown(exp["table"]), ""]
+        for fig in exp["figures"]:
+            parts += [f"{fig['caption']} - ours: {fig['setup']} ({fig['status']}).", ""]
+            parts += _failure_table(fig) + [""]
+        parts += [f"![{p}]({p})" for p in figures.get(name, [])] + [""]
+        all_findings += exp["findings"]
+    if all_findings:
+        parts += ["## The paper's findings here", "", f"Rules on {RULE_NOTE}; the paper's verdict is the same rule on "
+                  "its own numbers.", "", *findings_markdown(all_findings), ""]
+    parts += ["## Training", "", "| cell | status | updates | wall time (min) | attempts |", "|---|---|---|---|---|"]
+    for cid, info in data["cells"].items():
+        if cid.startswith("train:"):
+            parts.append(f"| {cid[6:]} | {info['status']} | {info['updates'] or '–'} / {info['planned_updates'] or '?'}"
+                         f" | {info['wall_min']} | {info['attempts']} |")
+    again = f"ovon experiment run {','.join(data['experiments'])} --scale {data['scale']} --root {data['root']}"
+    parts += ["", *[f"![curve {p}]({p})" for p in figures.get("_curves", [])], "",
+              "## Commands", "", f"Every cell's command (all of them: `{again}`).", "", "```"]
+    for cid, info in data["cells"].items():
+        code = f", {info['code']}" if info["code"] else ""
+        parts += [f"# {cid}: {info['status']}, {info['wall_min']} min{code}", *info["commands"]]
+    parts += ["```", ""]
+    return "\n".join(parts)
+
+
+def _failure_table(fig: dict) -> list[str]:
+    splits = fig["splits"]
+    lines = ["| failure (% of episodes) | " + " | ".join(splits) + " |", "|---|" + "---|" * len(splits)]
+    for g in fig["groups"]:
+        cells = []
+        for s in splits:
+            ours = f"**{g['ours'][s]:.1f}**" if g["ours"] and s in g["ours"] else "not run"
+            if g["paper"]:
+                paper = f"{g['paper'][s]:.1f}"
+            elif g["paper_range"]:
+                paper = f"{g['paper_range'][0]:.1f}-{g['paper_range'][1]:.1f} over the splits"
+            else:
+                paper = "–"
+            cells.append(f"{ours} (paper {paper})")
+        lines.append(f"| {g['name']} ({', '.join(g['labels'])}) | " + " | ".join(cells) + " |")
+    if fig["success"]:
+        lines.append("| success | " + " | ".join(f"{fig['success'].get(s, float('nan')):.1f}" for s in splits) + " |")
+    return lines
+
+
+# ----- entry point -----------------------------------------------------------------------------------
+def build_report(plan: Plan, out: str | Path) -> Path:
+    """Write `report.md`, `report.json` and the figures for the plan's experiments into `out`."""
+    from ovon.experiments.figures import failure_figure, table_figure, training_curve
+
+    out = Path(out)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    data = collect(plan)
+    figures: dict[str, list[str]] = {}
+    for name, exp in data["experiments"].items():
+        paths = []
+        if "table" in exp:
+            paths.append(table_figure(exp["title"], exp["table"], out / "figures" / f"{name}_table.png"))
+        for fig in exp["figures"]:
+            paths.append(failure_figure(fig, out / "figures" / f"{fig['name']}.png"))
+        figures[name] = [str(p.relative_to(out)) for p in paths]
+    curves = []
+    for cell in plan.cells.values():
+        if cell.kind == "train":
+            p = training_curve(cell.name, cell.folder, out / "figures" / f"curve_{cell.name}.png")
+            if p is not None:
+                curves.append(str(p.relative_to(out)))
+    figures["_curves"] = curves
+    write_json(out / "report.json", data)
+    atomic_write_text(out / "report.md", markdown(data, figures))
+    return out / "report.md"
+
+
+__all__ = ["build_report", "collect"]

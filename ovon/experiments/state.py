@@ -1,0 +1,322 @@
+"""What the runner knows about a cell: its record, its identity, its inputs, its lock and its status.
+
+Why records: a cell is finished when its command exited 0 and its outputs exist; the record
+(`<root>/<scale>/cells/<kind>-<name>.json`, written atomically) says so, with the command, the
+identities of what it read (data listing, init/checkpoint content hashes), the number of attempts and
+the wall time. A cell whose definition or inputs changed since it ran is "changed": never silently
+reused, never silently recomputed (`--redo` moves the old folder aside).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shlex
+import socket
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ovon.atomic import write_json
+from ovon.experiments.plan import Cell, Plan, display
+
+# Options that may change between the sessions of one evaluation folder without changing an episode's
+# result (the evaluation resumes and adds what is missing), and the one that marks a training resume.
+EVAL_MAY_CHANGE = ("--seeds", "--episodes", "--splits", "--workers", "--executor", "--no-progress")
+FLAGS = ("--no-progress", "--resume")
+ROOT_TOKEN = "$ROOT"
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+
+
+@dataclass
+class Status:
+    state: str  # done | partial | missing | failed | changed | running | waiting | unavailable | redo
+    detail: str = ""
+
+    def __str__(self) -> str:
+        return f"{self.state} ({self.detail})" if self.detail else self.state
+
+
+# ----- paths -----------------------------------------------------------------------------------------
+def record_path(plan: Plan, cell: Cell) -> Path:
+    return plan.base / "cells" / f"{cell.kind}-{cell.name}.json"
+
+
+def log_path(plan: Plan, cell: Cell) -> Path:
+    return plan.base / "logs" / f"{cell.kind}-{cell.name}.log"
+
+
+def lock_path(plan: Plan, cell: Cell) -> Path:
+    return plan.base / "locks" / f"{cell.kind}-{cell.name}.lock"
+
+
+def read_record(plan: Plan, cell: Cell) -> dict | None:
+    path = record_path(plan, cell)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError):
+        return {"state": "unreadable"}
+
+
+def write_record(plan: Plan, cell: Cell, record: dict) -> None:
+    write_json(record_path(plan, cell), record)
+
+
+# ----- identity --------------------------------------------------------------------------------------
+def _portable(plan: Plan, arg: str) -> str:
+    """`arg` with a leading root (or a `key=` value starting with it) written `$ROOT`."""
+    root = str(plan.root)
+    if root in ("", "."):
+        return arg
+    key, eq, value = arg.partition("=")
+    if eq and value.startswith(root) and not arg.startswith(root):
+        return key + eq + ROOT_TOKEN + value[len(root):]
+    return ROOT_TOKEN + arg[len(root):] if arg.startswith(root) else arg
+
+
+def full_commands(plan: Plan, cell: Cell) -> list[str]:
+    """The commands as text with the root written `$ROOT` (moving the root changes nothing)."""
+    return [display(cell, [_portable(plan, a) for a in argv]) for argv in cell.commands]
+
+
+def identity(plan: Plan, cell: Cell) -> list[str]:
+    """What must not change for a finished cell to count: its commands without the options that only
+    extend an evaluation (seeds, episodes, splits) or set its parallelism."""
+    out = []
+    for argv in cell.commands:
+        kept, skip = [], False
+        for a in argv:
+            if skip:
+                skip = False
+                continue
+            if cell.kind == "eval" and a in EVAL_MAY_CHANGE:
+                skip = a not in FLAGS
+                continue
+            kept.append(_portable(plan, a))
+        out.append(display(cell, kept))
+    return out
+
+
+def first_difference(old: list[str], new: list[str]) -> str:
+    """The first differing token of two command lists, for messages."""
+    if len(old) != len(new):
+        return f"{len(old)} command(s) -> {len(new)}"
+    for a, b in zip(old, new):
+        ta, tb = shlex.split(a), shlex.split(b)
+        for i, (x, y) in enumerate(zip(ta, tb)):
+            if x != y:
+                opt = ta[i - 1] + " " if i and ta[i - 1].startswith("--") and ta[i - 1] == tb[i - 1] else ""
+                return f"{opt}{x} -> {opt}{y}"
+        if len(ta) != len(tb):
+            extra = ta[len(tb):] or tb[len(ta):]
+            return f"{'removed' if len(ta) > len(tb) else 'added'} {' '.join(extra[:4])}"
+    return ""
+
+
+# ----- inputs ----------------------------------------------------------------------------------------
+_HASHES: dict[tuple, str] = {}
+
+
+def file_hash(path: Path) -> str | None:
+    """Content hash of a file (cached by size and mtime within the process), None when absent."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    key = (str(path), st.st_size, st.st_mtime_ns)
+    if key not in _HASHES:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+        _HASHES[key] = h.hexdigest()
+    return _HASHES[key]
+
+
+def data_fingerprint(plan: Plan) -> str | None:
+    """Identity of the episode dataset: names and sizes of its episode files (cheap for any size)."""
+    root = plan.episodes_dir
+    if not root.is_dir():
+        return None
+    h = hashlib.sha256()
+    files = sorted(p for p in root.rglob("*.json.gz") if p.is_file())
+    if not files:
+        return None
+    for p in files:
+        h.update(f"{p.relative_to(root).as_posix()}\0{p.stat().st_size}\n".encode())
+    return h.hexdigest()
+
+
+def inputs(plan: Plan, cell: Cell) -> dict[str, Any]:
+    """Identities of what the cell reads (absent values are None)."""
+    if cell.kind == "data":
+        return {}
+    out: dict[str, Any] = {"data": data_fingerprint(plan)}
+    for dep in cell.deps:
+        if dep.startswith("train:"):
+            out[dep] = file_hash(plan.cells[dep].folder / "policy.pt")
+    return out
+
+
+# ----- outputs ---------------------------------------------------------------------------------------
+def finished_outputs(plan: Plan, cell: Cell) -> bool:
+    if cell.kind == "train":
+        return (cell.folder / "policy.pt").is_file()
+    if cell.kind == "eval":
+        return (cell.folder / "summary.json").is_file()
+    return data_fingerprint(plan) is not None
+
+
+def partial_outputs(plan: Plan, cell: Cell) -> str:
+    """What a killed or failed attempt left ("" when nothing), e.g. "update 120/400"."""
+    if cell.kind == "train":
+        if not (cell.folder / "checkpoint.pt").is_file():
+            return ""
+        update = last_update(cell.folder)
+        return f"update {update}/{cell.total or '?'}" if update is not None else "checkpoint"
+    if cell.kind == "eval":
+        n = count_lines(cell.folder / "episodes.jsonl")
+        return f"{n}/{cell.total or '?'} episodes" if n else ""
+    return "some files" if cell.folder.is_dir() and any(cell.folder.iterdir()) else ""
+
+
+def last_update(folder: Path) -> int | None:
+    path = folder / "metrics.jsonl"
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - 4096))
+            lines = [ln for ln in f.read().splitlines() if ln.strip()]
+        for ln in reversed(lines):
+            try:
+                return int(json.loads(ln)["update"])
+            except (ValueError, KeyError):
+                continue
+    except OSError:
+        return None
+    return None
+
+
+def count_lines(path: Path) -> int:
+    try:
+        with open(path, "rb") as f:
+            return sum(1 for ln in f if ln.endswith(b"\n"))
+    except OSError:
+        return 0
+
+
+# ----- locks -----------------------------------------------------------------------------------------
+class CellLock:
+    """An exclusive, non-blocking lock of one cell (`flock`: released by the kernel when its holder
+    dies, so a killed run never leaves a stale lock). Works across machines on a shared file system
+    that supports `flock` (local disks, NFSv4)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.fd: int | None = None
+
+    def acquire(self) -> bool:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        if fcntl is not None:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                os.close(fd)
+                return False
+        os.ftruncate(fd, 0)
+        os.write(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
+                                 "since": time.strftime("%Y-%m-%d %H:%M:%S")}).encode())
+        self.fd = fd
+        return True
+
+    def release(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+
+def cell_lock(plan: Plan, cell: Cell) -> CellLock | None:
+    """The cell's lock, or None when another process holds it (the one place to swap the mechanism)."""
+    lock = CellLock(lock_path(plan, cell))
+    return lock if lock.acquire() else None
+
+
+def lock_holder(plan: Plan, cell: Cell) -> str | None:
+    """Who holds the cell's lock right now ("pid N on HOST since ..."), None when nobody does (a status
+    check creates nothing)."""
+    path = lock_path(plan, cell)
+    if fcntl is None or not path.exists():
+        return None
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return None
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+    try:
+        info = json.loads(lock_path(plan, cell).read_text())
+        return f"pid {info['pid']} on {info['host']} since {info['since']}"
+    except (OSError, ValueError, KeyError):
+        return "another process"
+
+
+# ----- status ----------------------------------------------------------------------------------------
+def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock: bool = True) -> Status:
+    """The cell's status given the statuses of the cells before it (`statuses`, by id)."""
+    if cell.unavailable:
+        return Status("unavailable", cell.unavailable)
+    if cell.kind == "data" and not cell.commands:  # the user's own dataset (paper scale)
+        if data_fingerprint(plan) is None:
+            return Status("missing", f"no episode files (*.json.gz) under {plan.episodes_dir}")
+        return Status("done", f"episodes {plan.episodes_dir}, scenes {plan.scenes_dir}")
+    if check_lock:
+        holder = lock_holder(plan, cell)
+        if holder:
+            return Status("running", holder)
+    rec = read_record(plan, cell)
+    if rec is not None and rec.get("state") == "unreadable":
+        return Status("changed", f"its record {record_path(plan, cell)} is unreadable")
+    if rec is not None and rec.get("identity") != identity(plan, cell):
+        why = first_difference(rec.get("identity") or [], identity(plan, cell))
+        return Status("changed", f"the definition changed since it ran: {why}")
+    if rec is not None and rec.get("state") == "done" and finished_outputs(plan, cell):
+        now = inputs(plan, cell)
+        moved = [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
+        if moved:
+            return Status("changed", f"its input(s) {', '.join(moved)} changed since it ran")
+        if rec.get("commands") != full_commands(plan, cell):
+            why = first_difference(rec.get("commands") or [], full_commands(plan, cell))
+            return Status("partial", f"to extend: {why}")
+        return Status("done", f"{rec.get('wall_s', 0) / 60:.1f} min")
+    waiting = [d for d in cell.deps if statuses.get(d, Status("done")).state != "done"]
+    if waiting:
+        return Status("waiting", ", ".join(waiting))
+    left = partial_outputs(plan, cell)
+    if rec is not None and rec.get("state") == "failed":
+        more = f"; {left}" if left else ""
+        return Status("failed", f"exit code {rec.get('rc')}, see {log_path(plan, cell)}{more}")
+    if left:
+        return Status("partial", left)
+    return Status("missing")
+
+
+def plan_status(plan: Plan, ids: list[str] | None = None, check_lock: bool = True) -> dict[str, Status]:
+    """Status of every cell (or of `ids` and what they depend on), in plan order."""
+    out: dict[str, Status] = {}
+    for cid, cell in plan.cells.items():
+        out[cid] = cell_status(plan, cell, out, check_lock)
+    return out if ids is None else {k: v for k, v in out.items() if k in ids}

@@ -1,0 +1,358 @@
+"""Experiments as data: every definition resolves to valid commands at every scale, the paper's numbers
+satisfy the paper's findings, shards cover every cell once, and a tiny run trains, evaluates, survives a
+SIGKILL, resumes without repeating finished cells and reports missing cells as "not run"."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+
+from ovon.experiments import (
+    DefinitionError,
+    build_report,
+    experiment_names,
+    load_catalogue,
+    load_experiment,
+    parse_shard,
+    resolve,
+    run,
+    select,
+)
+from ovon.experiments.report import experiment_results
+from ovon.experiments.select import DATA
+
+ROOT = Path(__file__).resolve().parents[1]
+EXPECTED = {"main", "trajectories", "memory", "noise", "failures"}
+MODULAR = {"vlfm", "dagrl-od"}  # built by the "modular" helper; "not available" until then
+
+
+def all_experiments():
+    return [load_experiment(n) for n in experiment_names()]
+
+
+def quiet() -> Console:
+    return Console(file=io.StringIO(), width=200)
+
+
+@pytest.mark.parametrize("scale", ["tiny", "cpu", "paper"])
+def test_every_definition_resolves_at_every_scale(scale: str, tmp_path: Path) -> None:
+    from ovon.agents import BUILTIN
+    from ovon.train.config import TrainConfig
+
+    assert EXPECTED <= set(experiment_names())
+    plan = resolve(all_experiments(), scale, tmp_path)
+    trains = {c.name: c for c in plan.cells.values() if c.kind == "train"}
+    evals = {c.name: c for c in plan.cells.values() if c.kind == "eval"}
+    assert len(trains) == 14 and len(evals) == 18
+    recipes = load_catalogue().recipes
+    for name, cell in trains.items():
+        assert isinstance(cell.train_cfg, TrainConfig), name
+        assert cell.train_cfg.algo == recipes[load_catalogue().train[name].recipe].algo
+        assert all(d in plan.cells for d in cell.deps), name
+        assert cell.folder == tmp_path / scale / "train" / name
+        if "--init" in cell.commands[0]:
+            init = cell.commands[0][cell.commands[0].index("--init") + 1]
+            assert init == str(tmp_path / scale / "train" / cell.deps[1].split(":")[1] / "policy.pt")
+    assert trains["dagger-lstm"].train_cfg.policy.core == "lstm"
+    assert trains["dagger-sp"].train_cfg.expert == "shortest-path"
+    assert trains["dagrl"].deps == ("data:data", "train:dagger")
+    for name, cell in evals.items():
+        ec = cell.eval_cell
+        assert ec.agent in BUILTIN or ec.agent in MODULAR, name
+        argv = cell.commands[0]
+        seeds = argv[argv.index("--seeds") + 1].split(",")
+        assert len(set(seeds)) >= 2
+        assert set(argv[argv.index("--splits") + 1].split(",")) <= {"val_seen", "val_seen_synonyms", "val_unseen"}
+    if scale == "paper":
+        assert trains["dagger"].launcher[0] == "torchrun" and "--nproc-per-node" in trains["dagger"].launcher
+        assert trains["dagger"].train_cfg.encoder.image == "siglip"
+        assert "--executor" in evals["dagrl"].commands[0] and "ray" in evals["dagrl"].commands[0]
+    else:
+        assert trains["dagger"].launcher == ()
+        assert trains["dagger"].train_cfg.encoder.image == "oracle-vl"
+    # VLFM sees the camera the policies were trained with
+    vlfm = evals["vlfm"].commands[0]
+    cam = trains["dagrl"].train_cfg.sim.camera
+    assert f"sim.camera.height={cam.height}" in vlfm
+
+
+def test_cells_shared_between_experiments_are_one_run_folder(tmp_path: Path) -> None:
+    main = resolve([load_experiment("main")], "cpu", tmp_path)
+    memory = resolve([load_experiment("memory")], "cpu", tmp_path)
+    both = resolve([load_experiment("main"), load_experiment("memory")], "cpu", tmp_path)
+    for cid in ("train:dagger", "train:dagrl", "eval:dagrl"):
+        assert main.cells[cid].commands == memory.cells[cid].commands == both.cells[cid].commands
+        assert main.cells[cid].folder == memory.cells[cid].folder
+    assert len([c for c in both.cells if c.startswith("train:")]) == 10  # 5 transformer + 5 LSTM, once each
+
+
+def test_every_table_entry_has_the_papers_numbers_and_they_satisfy_its_findings() -> None:
+    for exp in all_experiments():
+        evals = {}
+        for row in (exp.table.rows if exp.table else ()):
+            for name in {row.eval, *row.evals.values()} - {""}:
+                evals[name] = {"summary": None, "status": "missing", "setup": ""}
+        for fig in exp.figures:
+            evals[fig.eval] = {"summary": None, "status": "missing", "setup": ""}
+        res = experiment_results(exp, evals)
+        for row in res.get("table", {}).get("rows", []):
+            for entry in row["cells"].values():
+                assert entry["paper"] is not None and entry["ours"] is None
+        for f in res["findings"]:
+            assert f["paper"]["verdict"] == "holds", (exp.name, f["id"], f["paper"])
+            assert f["ours"]["verdict"] == "not run"
+    ids = sorted(f.id for e in all_experiments() for f in e.findings)
+    assert ids == ["a", "b", "c", "d", "e", "f"]
+
+
+def test_main_table_numbers_are_the_papers() -> None:
+    rows = {r.name: r for r in load_experiment("main").table.rows}
+    assert rows["DAgRL"].paper["val_seen"] == [41.3, 0.3, 21.2, 0.3]
+    assert rows["VLFM"].paper["val_unseen"] == [35.2, None, 19.6, None]
+    assert rows["DAgRL+OD"].paper["val_seen_synonyms"] == [39.0, 0.7, 21.4, 0.5]
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5])
+def test_shards_cover_every_cell_exactly_once_and_hold_whole_chains(n: int, tmp_path: Path) -> None:
+    plan = resolve(all_experiments(), "cpu", tmp_path)
+    shards = [select(plan, shard=(i, n)) for i in range(n)]
+    assert shards == [select(plan, shard=(i, n)) for i in range(n)]  # deterministic
+    cells = [c for s in shards for c in s if c != DATA]
+    assert sorted(cells) == sorted(c for c in plan.cells if c != DATA)
+    assert len(cells) == len(set(cells))
+    for s in shards:
+        assert s[0] == DATA
+        for c in s:
+            assert all(d in s for d in plan.cells[c].deps), (c, plan.cells[c].deps)
+    if n > 1:
+        assert all(len(s) > 1 for s in shards)
+
+
+def test_only_takes_what_a_cell_needs(tmp_path: Path) -> None:
+    plan = resolve([load_experiment("main")], "cpu", tmp_path)
+    assert select(plan, only=["eval:dagrl"]) == [DATA, "train:dagger", "train:dagrl", "eval:dagrl"]
+    assert select(plan, only=["bc"]) == [DATA, "train:bc", "eval:bc"]
+    with pytest.raises(DefinitionError, match="no cell 'nope'"):
+        select(plan, only=["nope"])
+    with pytest.raises(DefinitionError, match="0 <= i < n"):
+        parse_shard("2/2")
+
+
+def test_redo_takes_what_depends_on_a_cell_and_never_a_users_dataset(tmp_path: Path) -> None:
+    plan = resolve([load_experiment("main")], "cpu", tmp_path)
+    result = run(plan, redo_cells=["train:bc"], dry_run=True, console=quiet())
+    assert sorted(c for c, s in result.statuses.items() if s.state == "redo") == [
+        "eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
+    paper = resolve([load_experiment("main")], "paper", tmp_path)
+    with pytest.raises(DefinitionError, match="never moves"):
+        run(paper, redo_cells=["data"], dry_run=True, console=quiet())
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+BAD = {
+    "unknown recipe": ("train: {x: {recipe: nope}}\n", "recipe = 'nope'"),
+    "unknown init": ("train: {x: {recipe: finetune, init: ghost}}\n", "ghost"),
+    "bad train key": ("train: {x: {recipe: dagger, set: {ppo.clipp: 0.1}}}\n", "clipp"),
+    "unknown field": ("train: {x: {recipe: dagger, expertt: frontier}}\n", "expertt"),
+    "bad split": ("train: {x: {recipe: dagger}}\n", "splits"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_definitions_fail_with_one_line(case: str, tmp_path: Path) -> None:
+    train, expected = BAD[case]
+    splits = "[val_test]" if case == "bad split" else "[val_seen]"
+    text = (f"title: t\n{train}evaluate: {{e: {{agent: policy, checkpoint: x, splits: {splits}}}}}\n"
+            "table: {caption: c, columns: [{name: v, split: val_seen}], rows: [{name: r, eval: e, paper: {v: [1, null, "
+            "1, null]}}]}\n")
+    with pytest.raises(DefinitionError) as err:
+        resolve([load_experiment(str(_write(tmp_path / "bad.yaml", text)))], "cpu", tmp_path)
+    msg = str(err.value)
+    assert expected in msg and "\n" not in msg
+
+
+def test_missing_paper_numbers_and_bad_references_are_refused(tmp_path: Path) -> None:
+    base = ("title: t\ntable: {caption: c, columns: [{name: v, split: val_seen}], "
+            "rows: [{name: DAgRL, eval: dagrl%s}]}\n")
+    with pytest.raises(DefinitionError, match="no paper numbers"):
+        resolve([load_experiment(str(_write(tmp_path / "a.yaml", base % "")))], "cpu", tmp_path)
+    ok = base % ", paper: {v: [1, null, 1, null]}"
+    bad_ref = ok + "findings: [{id: z, claim: c, checks: [{kind: greater, pairs: [[DAgRL @ v, BC @ v]]}]}]\n"
+    with pytest.raises(DefinitionError, match="'BC @ v'"):
+        resolve([load_experiment(str(_write(tmp_path / "b.yaml", bad_ref)))], "cpu", tmp_path)
+    with pytest.raises(DefinitionError, match="unknown scale 'huge'"):
+        resolve([load_experiment("main")], "huge", tmp_path)
+    with pytest.raises(DefinitionError, match="seeds"):
+        resolve([load_experiment("main")], "cpu", tmp_path, ["evaluate.seeds=[0]"])
+    with pytest.raises(DefinitionError, match="unknown experiment 'mian'"):
+        load_experiment("mian")
+
+
+def test_cli_dry_run_prints_each_cells_status_and_command(tmp_path: Path) -> None:
+    from ovon.cli.main import main
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["experiment", "run", "main", "--scale", "paper", "--root", str(tmp_path), "--dry-run",
+                     "--shard", "0/2"]) == 0
+    text = out.getvalue()
+    assert "torchrun --standalone --nproc-per-node 8 -m ovon.cli.main train --algo" in text
+    assert "data:data" in text and "missing" in text
+    assert not (tmp_path / "paper").exists()  # a dry run writes nothing
+
+
+# ----- the runner on a tiny experiment ----------------------------------------------------------------
+TINY = """
+title: runner test
+paper_ref: none
+train:
+  t-dagger: {recipe: dagger, expert: shortest-path}
+  t-ft: {recipe: finetune, init: t-dagger}
+evaluate:
+  t-dagger: {agent: policy, checkpoint: t-dagger, agent_args: {deterministic: true}, splits: [val_seen]}
+  t-ft: {agent: policy, checkpoint: t-ft, agent_args: {deterministic: true}, splits: [val_seen]}
+  t-missing: {agent: "tests.no_such_module:Agent", splits: [val_seen]}
+table:
+  caption: test
+  columns: [{name: val_seen, split: val_seen}]
+  rows:
+    - {name: DAgger, eval: t-dagger, paper: {val_seen: [18.1, 0.4, 9.4, 0.3]}}
+    - {name: DAgRL, eval: t-ft, paper: {val_seen: [41.3, 0.3, 21.2, 0.3]}}
+    - {name: Missing, eval: t-missing, paper: {val_seen: [1.0, null, 1.0, null]}}
+findings:
+  - {id: x, claim: DAgRL beats DAgger, checks: [{kind: greater, pairs: [[DAgRL @ val_seen, DAgger @ val_seen]]}]}
+"""
+TINY_SET = ["data.val_scenes=1"]
+
+
+def _record(root: Path, cid: str) -> dict:
+    path = root / "tiny" / "cells" / f"{cid.replace(':', '-')}.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path: Path) -> None:
+    exp_file = _write(tmp_path / "tiny_exp.yaml", TINY)
+    root = tmp_path / "root"
+    cmd = [sys.executable, "-m", "ovon.cli.main", "experiment", "run", str(exp_file), "--scale", "tiny", "--root",
+           str(root), "--no-report", *(a for s in TINY_SET for a in ("--set", s))]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    deadline = time.time() + 400
+    try:
+        while time.time() < deadline:  # kill once the fine-tune (the second training cell) is running
+            rec = _record(root, "train:t-ft")
+            if rec.get("state") == "running" and rec.get("pid"):
+                break
+            assert proc.poll() is None, proc.stdout.read().decode()
+            time.sleep(0.5)
+        else:
+            pytest.fail("the fine-tune cell never started")
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    child = _record(root, "train:t-ft")["pid"]
+    for _ in range(50):  # the cell's command dies with the runner (parent-death signal)
+        if not _alive(child):
+            break
+        time.sleep(0.2)
+    assert not _alive(child)
+    first = _record(root, "train:t-dagger")
+    assert first["state"] == "done" and first["attempts"] == 1
+    policy = root / "tiny" / "train" / "t-dagger" / "policy.pt"
+    mtime = policy.stat().st_mtime_ns
+
+    plan = resolve([load_experiment(str(exp_file))], "tiny", root, TINY_SET)
+    result = run(plan, console=quiet())
+    assert result.ok and result.failed == []
+    assert "train:t-dagger" not in result.ran and "data:data" not in result.ran
+    assert {"train:t-ft", "eval:t-dagger", "eval:t-ft"} <= set(result.ran)
+    assert policy.stat().st_mtime_ns == mtime
+    assert _record(root, "train:t-dagger")["attempts"] == 1
+    assert _record(root, "data:data")["attempts"] == 1
+    assert _record(root, "train:t-ft")["attempts"] == 2 and _record(root, "train:t-ft")["state"] == "done"
+    assert result.statuses["eval:t-missing"].state == "unavailable"
+
+    again = run(plan, console=quiet())  # everything finished: nothing runs
+    assert again.ran == [] and again.ok
+    assert {c: _record(root, c).get("attempts") for c in ("eval:t-dagger", "eval:t-ft")} == {
+        "eval:t-dagger": 1, "eval:t-ft": 1}
+
+    report = build_report(plan, tmp_path / "report")
+    data = json.loads((tmp_path / "report" / "report.json").read_text())
+    rows = {r["name"]: r["cells"]["val_seen"] for r in data["experiments"]["tiny_exp"]["table"]["rows"]}
+    assert rows["Missing"]["ours"] is None and "not available" in rows["Missing"]["status"]
+    assert rows["DAgRL"]["ours"]["seeds"] == 2 and rows["DAgRL"]["paper"]["sr"] == 41.3
+    text = report.read_text()
+    assert "not run (paper 1.0)" in text and "| Missing |" in text
+    assert "(x) DAgRL beats DAgger" in text
+    assert (tmp_path / "report" / "figures" / "curve_t-ft.png").is_file()
+    assert (tmp_path / "report" / "figures" / "tiny_exp_table.png").is_file()
+
+    # a changed definition is refused before any work, with the fix
+    with pytest.raises(DefinitionError, match="--redo"):
+        run(resolve([load_experiment(str(exp_file))], "tiny", root, [*TINY_SET, "data.train_scenes=2"]),
+            console=quiet())
+
+
+def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:
+    from ovon.experiments.state import cell_lock, cell_status, lock_holder
+
+    plan = resolve([load_experiment("main")], "cpu", tmp_path)
+    cell = plan.cells["train:dagger"]
+    lock = cell_lock(plan, cell)
+    assert lock is not None
+    code = ("import sys; from pathlib import Path; from ovon.experiments import resolve, load_experiment;"
+            "from ovon.experiments.state import cell_lock;"
+            f"p = resolve([load_experiment('main')], 'cpu', Path({str(tmp_path)!r}));"
+            "sys.exit(0 if cell_lock(p, p.cells['train:dagger']) is None else 1)")
+    assert subprocess.run([sys.executable, "-c", code], cwd=ROOT).returncode == 0
+    assert f"pid {os.getpid()}" in lock_holder(plan, cell)
+    assert cell_status(plan, cell, {}).state == "running"
+    lock.release()
+    assert lock_holder(plan, cell) is None
+
+
+@pytest.mark.slow
+def test_main_at_tiny_scale_end_to_end(tmp_path: Path) -> None:
+    """The whole `main` experiment at tiny scale (the modular rows stay "not run" until their agents exist),
+    then extending the evaluation seeds re-runs only the evaluations."""
+    from ovon.agents import BUILTIN
+
+    plan = resolve([load_experiment("main")], "tiny", tmp_path)
+    result = run(plan, console=quiet())
+    assert result.ok
+    want = {c for c in plan.cells if not (c.startswith("eval:") and plan.cells[c].eval_cell.agent not in BUILTIN)}
+    assert {c for c, s in result.statuses.items() if s.state == "done"} == want
+    more = resolve([load_experiment("main")], "tiny", tmp_path, ["evaluate.seeds=[0,1,2]"])
+    again = run(more, console=quiet())
+    assert again.ok and all(c.startswith("eval:") for c in again.ran) and again.ran
+    text = (tmp_path / "tiny" / "reports" / "main" / "report.md").read_text()
+    assert "over 3 seeds" in text
+    redone = run(more, redo_cells=["train:bc"], console=quiet())  # BC, BC->RL and their evaluations again
+    assert sorted(redone.ran) == ["eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
+    assert (tmp_path / "tiny" / "train" / "bc.old-1" / "policy.pt").is_file()
+    assert (tmp_path / "tiny" / "train" / "bc.old-1" / "experiment_record.json").is_file()
