@@ -299,11 +299,16 @@ class _TypeMismatch(Exception):
     pass
 
 
-def _coerce(value: Any, tp: Any) -> Any:
-    """`value` (from YAML, a `--set` string or Python) as type `tp`; raises _TypeMismatch."""
+def _coerce(value: Any, tp: Any, where: str = "") -> Any:
+    """`value` (from YAML, a `--set` string or Python) as type `tp`; raises _TypeMismatch (or a ConfigError
+    naming the nested key for a config inside a list)."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if dataclasses.is_dataclass(tp):
-        raise _TypeMismatch  # handled by the caller (needs the key for nested messages)
+        if isinstance(value, tp):
+            return value
+        if not isinstance(value, Mapping):
+            raise _TypeMismatch
+        return _from_dict(tp, value, where)
     if _is_union(tp):
         if value is None and type(None) in args:
             return None
@@ -313,7 +318,7 @@ def _coerce(value: Any, tp: Any) -> Any:
             if a is type(None):
                 continue
             try:
-                return _coerce(value, a)
+                return _coerce(value, a, where)
             except _TypeMismatch:
                 continue
         raise _TypeMismatch
@@ -332,9 +337,9 @@ def _coerce(value: Any, tp: Any) -> Any:
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(args) != len(value):
                 raise _TypeMismatch
-            return tuple(_coerce(v, a) for v, a in zip(value, args))
+            return tuple(_coerce(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
         inner = args[0] if args else Any
-        out = [_coerce(v, inner) for v in value]
+        out = [_coerce(v, inner, f"{where}[{i}]") for i, v in enumerate(value)]
         return tuple(out) if origin is tuple else out
     if origin is dict or tp is dict:
         if not isinstance(value, dict):
@@ -485,6 +490,11 @@ def violations(cfg: Any, where: str = "") -> list[str]:
             out.append(_violation(key, value, f, tp))
             bad_keys.add(f.name)
             continue
+        if isinstance(value, list | tuple | dict):  # configs inside lists / mappings have domains too
+            items = value.items() if isinstance(value, dict) else enumerate(value)
+            for i, v in items:
+                if dataclasses.is_dataclass(v) and not isinstance(v, type):
+                    out += violations(v, f"{key}[{i!r}]" if isinstance(value, dict) else f"{key}[{i}]")
         dom: Domain | None = f.metadata.get("domain")
         if dom is not None and value is not None and not dom.accepts(value):
             out.append(_violation(key, value, f, tp))
@@ -524,7 +534,7 @@ def _coerce_field(cls: type, f: dataclasses.Field, tp: Any, value: Any, key: str
                               f"({', '.join(x.name for x in dataclasses.fields(tp))}); fix: --set {key}.FIELD=VALUE")
         return _from_dict(tp, value, key)
     try:
-        return _coerce(value, tp)
+        return _coerce(value, tp, key)
     except _TypeMismatch:
         raise ConfigError(_violation(key, value, f, tp)) from None
 
