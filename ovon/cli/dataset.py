@@ -24,10 +24,11 @@ from ovon.config.base import (
     non_empty,
     positive,
 )
+from ovon.dataset.io import SPLIT_NAME_PATTERN
 from ovon.dataset.splits import EPISODE_SPLITS as _SPLITS
 from ovon.dataset.splits import SplitConfig
 
-SPLIT_NAME = Pattern(r"[A-Za-z0-9][A-Za-z0-9_.-]*", "split folder names (letters, digits, _ . -)")
+SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,8 @@ SPLIT_ALIASES: dict[str, str] = {
     "val_unseen": "val_unseen_hard",
 }
 SHARD_SUFFIX = ".json.gz"
+# A split is a folder under the dataset root: a plain name, never a path that could leave the root.
+SPLIT_NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]*"
 
 
 @dataclass

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -31,12 +32,13 @@ from ovon.config.base import (
 )
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
+from ovon.dataset.io import SPLIT_NAME_PATTERN
 from ovon.evaluate.results import RecordWriter, paper_table, read_records, record_key, summarize, write_canonical
 from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
 DEFAULT_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
-SPLIT_NAME = Pattern(r"[A-Za-z0-9][A-Za-z0-9_.-]*", "split folder names (letters, digits, _ . -)")
+SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
 MAY_CHANGE = ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "chunk", "name",
@@ -67,7 +69,7 @@ def parse_noise(spec: str | None) -> NoiseConfig:
     cfg = NoiseConfig()
     if not spec:
         return cfg
-    models = ("none", "gaussian", "ilqr", "proportional", "movebase")
+    models = typing.get_args(typing.get_type_hints(NoiseConfig)["actuation"])
     fix = "fix: use e.g. --noise actuation,odometry or --noise actuation:movebase*0.5"
     for item in [s.strip() for s in spec.split(",") if s.strip()]:
         name, _, arg = item.partition(":")
