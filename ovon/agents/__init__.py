@@ -1,8 +1,16 @@
-"""Agents: the protocol, built-ins chosen by name, and `package.module:ClassName` for your own."""
+"""Agents: the protocol, built-ins chosen by name, and `package.module:ClassName` for your own.
+
+`check_agent(name, kwargs)` is what a command calls before any work: it loads the class, checks that it
+has `reset` and `act`, binds the keyword arguments to its constructor and builds one instance, so a
+wrong name, a bogus `--agent-arg` or an unreadable checkpoint is one clear line instead of a traceback
+in a worker process."""
 
 from __future__ import annotations
 
 import importlib
+import inspect
+import os
+import sys
 
 from ovon.agents.base import Agent, is_privileged
 
@@ -13,30 +21,92 @@ BUILTIN: dict[str, str] = {
     "policy": "ovon.agents.policy_agent:PolicyAgent",
 }
 
+_FIX = "fix: use one of {builtin} or 'package.module:ClassName' (a class with reset(episode_info) and act(observation))"
+
+
+class AgentError(ValueError):
+    """The agent cannot be loaded or built; the message names the agent, the argument and the fix."""
+
+
+def _import(module_name: str):
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as e:
+        # `ovon` (the console script) does not put the working directory on sys.path; `my_agent:MyAgent`
+        # next to the user's data should still load.
+        if e.name and module_name.split(".")[0] == e.name.split(".")[0] and os.getcwd() not in sys.path:
+            sys.path.append(os.getcwd())
+            return importlib.import_module(module_name)
+        raise
+
 
 def load_agent_class(name: str) -> type:
+    fix = _FIX.format(builtin=sorted(BUILTIN))
     target = BUILTIN.get(name, name)
-    if ":" not in target:
-        raise ValueError(
-            f"unknown agent {name!r}: use one of {sorted(BUILTIN)} or 'package.module:ClassName'"
-        )
-    module_name, cls_name = target.split(":", 1)
+    module_name, sep, cls_name = str(target).partition(":")
+    if not sep or not module_name.strip() or not cls_name.strip():
+        raise AgentError(f"unknown agent {name!r}; {fix}")
     try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as e:
-        raise ValueError(f"agent {name!r}: cannot import module {module_name!r} ({e})") from None
+        module = _import(module_name)
+    except Exception as e:  # noqa: BLE001 - any import failure of user code is reported in one line
+        detail = " ".join(str(e).split())[:160]
+        raise AgentError(f"agent {name!r}: cannot import module {module_name!r} ({type(e).__name__}: {detail}); "
+                         f"{fix}") from None
+    obj = module
+    for part in cls_name.split("."):
+        if not hasattr(obj, part):
+            raise AgentError(f"agent {name!r}: module {module_name!r} has no attribute {cls_name!r}; {fix}")
+        obj = getattr(obj, part)
+    if not inspect.isclass(obj):
+        raise AgentError(f"agent {name!r}: {module_name}:{cls_name} is a {type(obj).__name__}, not a class; {fix}")
+    missing = [m for m in ("reset", "act") if not callable(getattr(obj, m, None))]
+    if missing:
+        raise AgentError(f"agent {name!r}: class {obj.__module__}.{obj.__qualname__} has no {' / '.join(missing)} "
+                         f"method; {fix}")
+    return obj
+
+
+def _bind(name: str, cls: type, kwargs: dict) -> None:
     try:
-        cls = getattr(module, cls_name)
-    except AttributeError:
-        raise ValueError(f"agent {name!r}: module {module_name!r} has no attribute {cls_name!r}") from None
-    return cls
+        sig = inspect.signature(cls)
+    except (TypeError, ValueError):
+        return
+    params = sig.parameters.values()
+    accepts_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
+    names = [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    unknown = [k for k in kwargs if k not in names]
+    if unknown and not accepts_any:
+        raise AgentError(f"agent {name!r} has no constructor argument {unknown[0]!r} (--agent-arg {unknown[0]}=...); "
+                         f"fix: use one of {names or 'none'}")
+    missing = [p.name for p in params if p.default is inspect.Parameter.empty
+               and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in kwargs]
+    if missing:
+        flag = "--checkpoint PATH" if missing[0] == "checkpoint" else f"--agent-arg {missing[0]}=VALUE"
+        raise AgentError(f"agent {name!r} needs the argument {missing[0]!r}; fix: pass {flag}")
+
+
+def check_agent(name: str, kwargs: dict | None = None) -> None:
+    """Load, bind and build the agent once (then drop it); any problem is one AgentError line."""
+    kwargs = dict(kwargs or {})
+    cls = load_agent_class(name)
+    _bind(name, cls, kwargs)
+    try:
+        agent = cls(**kwargs)
+    except Exception as e:  # noqa: BLE001 - the constructor is user code: report, don't trace
+        detail = " ".join(str(e).split())[:200]
+        args = ", ".join(f"{k}={v!r}" for k, v in kwargs.items()) or "no arguments"
+        raise AgentError(f"agent {name!r} cannot be built with {args}: {type(e).__name__}: {detail}; fix: check "
+                         "--agent, --agent-arg and --checkpoint") from None
+    if not isinstance(agent, Agent):
+        raise AgentError(f"agent {name!r} must define reset(episode_info) and act(observation)")
+    del agent
 
 
 def make_agent(name: str, **kwargs) -> Agent:
     agent = load_agent_class(name)(**kwargs)
     if not isinstance(agent, Agent):
-        raise TypeError(f"agent {name!r} must define reset(episode_info) and act(observation)")
+        raise AgentError(f"agent {name!r} must define reset(episode_info) and act(observation)")
     return agent
 
 
-__all__ = ["Agent", "BUILTIN", "is_privileged", "load_agent_class", "make_agent"]
+__all__ = ["Agent", "AgentError", "BUILTIN", "check_agent", "is_privileged", "load_agent_class", "make_agent"]

@@ -1,11 +1,68 @@
-"""`ovon dataset generate | splits | stats | validate`."""
+"""`ovon dataset generate | splits | stats | validate`.
+
+Each command's options are a dataclass with declared domains (`ovon.config.base`), built by `from_args`:
+bad options are refused in one line before any scene is loaded."""
 
 from __future__ import annotations
 
 import json
 import os
-import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
+
+from ovon.config.base import (
+    ExistingPath,
+    OneOf,
+    Pattern,
+    constrained,
+    domain_of,
+    existing_dir,
+    existing_file,
+    from_args,
+    in_range,
+    non_empty,
+    positive,
+)
+from ovon.dataset.io import SPLIT_NAME_PATTERN
+from ovon.dataset.splits import EPISODE_SPLITS as _SPLITS
+from ovon.dataset.splits import SplitConfig
+
+SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
+
+
+@dataclass(frozen=True)
+class GenerateArgs:
+    scenes: str = existing_dir(flag="--scenes")
+    split: tuple[str, ...] = non_empty(_SPLITS, each=OneOf(_SPLITS), distinct=True, flag="--split")
+    categories: str = existing_file("", optional=True, flag="--categories")
+    config: str = existing_file("", optional=True, flag="--config")
+    workers: int = in_range(1, 1, 1024, flag="--workers")
+    executor: Literal["process", "ray"] = constrained("process", flag="--executor")
+
+
+@dataclass(frozen=True)
+class SplitsArgs:
+    """The options of `ovon dataset splits`; the numbers share `SplitConfig`'s domains."""
+
+    scenes: str = existing_dir("", optional=True, flag="--scenes")
+    seed: int = constrained(0, domain_of(SplitConfig, "seed"), flag="--seed")
+    threshold: float = constrained(0.68, domain_of(SplitConfig, "similarity_threshold"), flag="--threshold")
+    holdout: float = constrained(0.25, domain_of(SplitConfig, "holdout_fraction"), flag="--holdout")
+    out: str = non_empty("categories.json", flag="--out")
+
+
+@dataclass(frozen=True)
+class ValidateArgs:
+    data: str = existing_dir(flag="DATA")
+    scenes: str = existing_dir(flag="--scenes")
+    split: tuple[str, ...] | None = non_empty(None, each=SPLIT_NAME, distinct=True, flag="--split")
+    max_episodes_per_scene: int | None = positive(None, flag="--max-episodes-per-scene")
+
+
+@dataclass(frozen=True)
+class StatsArgs:
+    data: str = constrained("", ExistingPath("dir"), flag="DATA")
 
 
 def register(sub) -> None:
@@ -21,7 +78,7 @@ def register(sub) -> None:
     g.add_argument("--config", help="YAML with GenerationConfig fields")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override, e.g. episodes_per_val_split=300 or viewpoints.render_size=128")
-    g.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    g.add_argument("--workers", default=min(2, os.cpu_count() or 1))
     g.add_argument("--executor", choices=["process", "ray"], default="process")
     g.add_argument("--no-progress", action="store_true")
     g.set_defaults(func=cmd_generate)
@@ -29,9 +86,9 @@ def register(sub) -> None:
     s = dsub.add_parser("splits", help="category split by SentenceBERT similarity -> categories.json")
     s.add_argument("--scenes", help="scene dataset folder: split the categories annotated in it")
     s.add_argument("--vocabulary", action="store_true", help="split the whole embedded vocabulary instead")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--threshold", type=float, default=0.68)
-    s.add_argument("--holdout", type=float, default=0.25)
+    s.add_argument("--seed", default=0)
+    s.add_argument("--threshold", default=0.68)
+    s.add_argument("--holdout", default=0.25)
     s.add_argument("--out", required=True, help="path of categories.json")
     s.set_defaults(func=cmd_splits)
 
@@ -44,19 +101,19 @@ def register(sub) -> None:
     v.add_argument("data")
     v.add_argument("--scenes", required=True)
     v.add_argument("--split", action="append")
-    v.add_argument("--max-episodes-per-scene", type=int)
+    v.add_argument("--max-episodes-per-scene")
     v.set_defaults(func=cmd_validate)
 
 
 def cmd_generate(args) -> int:
     from ovon.config.base import build
     from ovon.config.dataset import GENERATION_PRESETS, GenerationConfig
-    from ovon.dataset.generate import ALL_SPLITS, generate
+    from ovon.dataset.generate import generate
 
-    cfg = build(GenerationConfig, GENERATION_PRESETS[args.preset](), args.config, args.set)
-    splits = tuple(args.split) if args.split else ALL_SPLITS
-    rep = generate(args.scenes, args.out, cfg, splits=splits, workers=args.workers, executor=args.executor,
-                   progress=not args.no_progress, category_split_path=args.categories)
+    a = from_args(GenerateArgs, args, split=tuple(args.split) if args.split else None)
+    cfg = build(GenerationConfig, GENERATION_PRESETS[args.preset](), a.config or None, args.set)
+    rep = generate(a.scenes, args.out, cfg, splits=a.split, workers=a.workers, executor=a.executor,
+                   progress=not args.no_progress, category_split_path=a.categories or None)
     n = sum(rep.episodes.values())
     per_scene = rep.seconds / max(1, rep.scenes)
     print(f"new episodes per split: {json.dumps(rep.episodes)}")
@@ -70,11 +127,16 @@ def cmd_generate(args) -> int:
 
 
 def cmd_splits(args) -> int:
+    from ovon.config.base import ConfigError
     from ovon.dataset.splits import SplitConfig, split_categories
 
-    if args.vocabulary == bool(args.scenes):
-        print("ovon dataset splits: give exactly one of --scenes DIR or --vocabulary", file=sys.stderr)
-        return 2
+    a = from_args(SplitsArgs, args)
+    if args.vocabulary == bool(a.scenes):
+        raise ConfigError("ovon dataset splits: give exactly one of --scenes DIR or --vocabulary; fix: e.g. "
+                          "ovon dataset splits --vocabulary --out categories.json")
+    if Path(a.out).is_dir():
+        raise ConfigError(f"--out {a.out!r} is a folder; expected the path of categories.json; fix: e.g. "
+                          f"--out {Path(a.out) / 'categories.json'}")
     if args.vocabulary:
         from ovon.scenes.vocabulary import load_vocabulary
 
@@ -82,22 +144,22 @@ def cmd_splits(args) -> int:
     else:
         from ovon.dataset.generate import discover_scenes, scene_categories
 
-        cats = sorted(set().union(*(scene_categories(r) for r in discover_scenes(args.scenes))))
-    cs = split_categories(cats, SplitConfig(seed=args.seed, holdout_fraction=args.holdout,
-                                            similarity_threshold=args.threshold))
-    cs.save(args.out)
+        cats = sorted(set().union(*(scene_categories(r) for r in discover_scenes(a.scenes))))
+    cs = split_categories(cats, SplitConfig(seed=a.seed, holdout_fraction=a.holdout,
+                                            similarity_threshold=a.threshold))
+    cs.save(a.out)
     for name in ("val_seen_synonyms", "val_unseen"):
         rng = cs.similarity_range(name)
         print(f"{name}: {len(cs.categories(name))} categories"
               + (f", similarity [{rng[0]:.2f}, {rng[1]:.2f}]" if rng else ""))
-    print(f"train: {len(cs.categories('train'))} categories; written {Path(args.out)}")
+    print(f"train: {len(cs.categories('train'))} categories; written {Path(a.out)}")
     return 0
 
 
 def cmd_stats(args) -> int:
     from ovon.dataset.stats import dataset_stats, format_stats
 
-    stats = dataset_stats(args.data)
+    stats = dataset_stats(from_args(StatsArgs, args).data)
     print(json.dumps(stats, indent=2) if args.json else format_stats(stats))
     return 0
 
@@ -105,7 +167,9 @@ def cmd_stats(args) -> int:
 def cmd_validate(args) -> int:
     from ovon.dataset.validate import validate_dataset
 
-    rep = validate_dataset(args.data, args.scenes, args.split, max_episodes_per_scene=args.max_episodes_per_scene)
+    a = from_args(ValidateArgs, args, split=tuple(args.split) if args.split else None)
+    rep = validate_dataset(a.data, a.scenes, list(a.split) if a.split else None,
+                           max_episodes_per_scene=a.max_episodes_per_scene)
     for e in rep.errors[:50]:
         print(f"  {e}")
     status = "OK" if rep.ok else f"{sum(rep.counts.values())} problem(s): {dict(rep.counts)}"

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
 
+from ovon.config.base import ExistingDir, existing_dir, from_args, in_range, non_empty, non_negative, validate
 from ovon.config.sim import SimConfig
+from ovon.evaluate.harness import EvalConfig, apply_overrides, parse_noise
 
 
 def _csv(s: str) -> list[str]:
@@ -24,15 +27,15 @@ def register(sub) -> None:
     p.add_argument("--data", required=True, help="episode dataset root (holds val_seen/ ...)")
     p.add_argument("--scenes", required=True, help="scene-datasets root or the scene dataset folder")
     p.add_argument("--splits", default="val_seen,val_seen_synonyms,val_unseen")
-    p.add_argument("--seeds", default="0")
-    p.add_argument("--episodes", type=int, default=None, help="episodes per split (default: all)")
+    p.add_argument("--seeds", default="0", help="comma-separated, e.g. 0,1,2")
+    p.add_argument("--episodes", default=None, help="episodes per split (default: all)")
     p.add_argument("--noise", default="", help="e.g. actuation,odometry or actuation:movebase*0.5")
     p.add_argument("--preset", choices=["auto", "cpu", "paper"], default="auto",
                    help="cpu: 160x120 frames; paper: the 360x640 Stretch camera; auto: the camera a policy "
                         "checkpoint was trained with, else cpu")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="config override, e.g. sim.camera.width=224 or task.max_steps=300")
-    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    p.add_argument("--workers", default=min(2, os.cpu_count() or 1))
     p.add_argument("--executor", choices=["process", "ray"], default="process")
     p.add_argument("--name", help="row name in tables (default: the agent name)")
     p.add_argument("--out", required=True, help="run folder (episodes.jsonl, summary.json, table.md)")
@@ -48,21 +51,29 @@ def register(sub) -> None:
     v.add_argument("--run", required=True)
     v.add_argument("--episode", required=True)
     v.add_argument("--split")
-    v.add_argument("--seed", type=int)
+    v.add_argument("--seed")
     v.add_argument("--scene", help="part of the scene path (episode ids are unique per scene only)")
-    v.add_argument("--fps", type=int, default=8)
+    v.add_argument("--fps", default=8)
     v.add_argument("--out", required=True)
     v.set_defaults(func=cmd_video)
 
 
 def _agent_kwargs(items: list[str], checkpoint: str | None) -> dict:
+    from ovon.config.base import ConfigError
+
     kwargs = {}
     for item in items:
-        if "=" not in item:
-            raise ValueError(f"--agent-arg {item!r} is not KEY=VALUE")
-        k, v = item.split("=", 1)
-        kwargs[k] = yaml.safe_load(v)
-    if checkpoint:
+        k, sep, v = item.partition("=")
+        if not sep or not k.strip().isidentifier():
+            raise ConfigError(f"--agent-arg {item!r} is not KEY=VALUE with KEY a Python name; fix: e.g. "
+                              "--agent-arg temperature=0.5")
+        try:
+            kwargs[k.strip()] = yaml.safe_load(v) if v != "" else ""
+        except (yaml.YAMLError, RecursionError, ValueError):
+            kwargs[k.strip()] = v  # not YAML: the text itself
+    if checkpoint is not None:
+        if "checkpoint" in kwargs:
+            raise ConfigError("--checkpoint and --agent-arg checkpoint=... both given; fix: pass one of them")
         kwargs["checkpoint"] = checkpoint
     return kwargs
 
@@ -72,54 +83,87 @@ def trained_camera(checkpoint: str) -> dict:
     world through the resolution it learned on unless the user asks otherwise."""
     import torch
 
+    from ovon.config.base import ConfigError
     from ovon.config.sim import CameraConfig
 
     path = Path(checkpoint)
     path = path / "policy.pt" if path.is_dir() else path
+    fix = "fix: pass the policy.pt written by `ovon train` (or its run folder)"
     if not path.is_file():
-        raise FileNotFoundError(f"policy checkpoint {path} does not exist; pass the policy.pt written by ovon train")
-    extra = torch.load(path, map_location="cpu", weights_only=True).get("extra", {}) or {}
+        raise FileNotFoundError(f"--checkpoint {str(checkpoint)!r}: {path} does not exist; {fix}")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - torch raises many types for a bad file
+        detail = " ".join(str(e).split())[:120]
+        raise ConfigError(f"--checkpoint {str(checkpoint)!r}: not a checkpoint torch can read ({type(e).__name__}: "
+                          f"{detail}); {fix}") from None
+    if not isinstance(ckpt, dict):
+        raise ConfigError(f"--checkpoint {str(checkpoint)!r}: holds a {type(ckpt).__name__}, not a policy; {fix}")
+    extra = ckpt.get("extra", {}) or {}
+    camera = extra.get("camera") if isinstance(extra, dict) else None
     fields = {f.name for f in dataclasses.fields(CameraConfig)}
-    return {k: v for k, v in (extra.get("camera") or {}).items() if k in fields and k != "backend"}
+    return {k: v for k, v in (camera or {}).items() if k in fields and k != "backend"}
 
 
-def cmd_evaluate(args) -> int:
-    from ovon.evaluate.harness import EvalConfig, apply_overrides, evaluate, parse_noise
+def eval_config(args) -> EvalConfig:
+    """The command line as an `EvalConfig`, through the one config path (coercion + declared domains), so
+    `--episodes -1`, `--seeds ''` or `--splits ''` are refused with the same one-line message as `--set`."""
+    from ovon.config.base import from_dict
 
-    cfg = EvalConfig(
-        agent=args.agent,
-        agent_kwargs=_agent_kwargs(args.agent_arg, args.checkpoint),
-        data=args.data,
-        scenes=args.scenes,
-        splits=tuple(_csv(args.splits)),
-        seeds=tuple(int(s) for s in _csv(args.seeds)),
-        episodes=args.episodes,
-        workers=args.workers,
-        executor=args.executor,
-        name=args.name,
-    )
+    cfg = from_dict(EvalConfig, {
+        "agent": args.agent,
+        "agent_kwargs": _agent_kwargs(args.agent_arg, args.checkpoint),
+        "data": args.data,
+        "scenes": args.scenes,
+        "splits": args.splits,
+        "seeds": args.seeds,
+        "episodes": args.episodes,
+        "workers": args.workers,
+        "executor": args.executor,
+        "name": args.name,
+    })
     if args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
     elif args.preset == "auto" and args.agent == "policy" and cfg.agent_kwargs.get("checkpoint"):
-        camera = trained_camera(cfg.agent_kwargs["checkpoint"])
+        camera = trained_camera(str(cfg.agent_kwargs["checkpoint"]))
         if camera:
             cfg = dataclasses.replace(cfg, sim=dataclasses.replace(
                 cfg.sim, camera=dataclasses.replace(cfg.sim.camera, **camera)))
-            print(f"camera of the checkpoint: {camera['width']}x{camera['height']} (--preset cpu|paper overrides)")
+            print(f"camera of the checkpoint: {camera.get('width')}x{camera.get('height')} (--preset cpu|paper "
+                  "overrides)")
     cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, noise=parse_noise(args.noise)))
-    cfg = apply_overrides(cfg, args.set)
-    summary = evaluate(cfg, args.out, progress=not args.no_progress)
+    return validate(apply_overrides(cfg, args.set))
+
+
+def cmd_evaluate(args) -> int:
+    from ovon.evaluate.harness import evaluate
+
+    summary = evaluate(eval_config(args), args.out, progress=not args.no_progress)
     print((Path(args.out) / "table.md").read_text(), end="")
     n = sum(s["episodes"] for s in summary["splits"].values())
     print(f"{n} episodes; run folder: {args.out}")
     return 0
 
 
+@dataclass(frozen=True)
+class ReportArgs:
+    runs: tuple[str, ...] = non_empty((), each=ExistingDir(), distinct=True, flag="RUNS")
+
+
+@dataclass(frozen=True)
+class VideoArgs:
+    run: str = existing_dir(flag="--run")
+    episode: str = non_empty("", flag="--episode")
+    seed: int | None = non_negative(None, flag="--seed")
+    fps: int = in_range(8, 1, 120, flag="--fps")
+
+
 def cmd_report(args) -> int:
     from ovon.reports.build import build_report
 
-    out = args.out or str(Path(args.runs[0]) / "report")
-    path = build_report(args.runs, out)
+    a = from_args(ReportArgs, args, runs=tuple(args.runs))
+    out = args.out or str(Path(a.runs[0]) / "report")
+    path = build_report(list(a.runs), out)
     print(path.read_text().split("## Failure breakdown")[0], end="")
     print(f"report: {path}")
     return 0
@@ -128,7 +172,7 @@ def cmd_report(args) -> int:
 def cmd_video(args) -> int:
     from ovon.reports.video import render_video
 
-    path = render_video(args.run, args.episode, args.out, split=args.split, seed=args.seed, fps=args.fps,
-                        scene=args.scene)
+    a = from_args(VideoArgs, args)
+    path = render_video(a.run, a.episode, args.out, split=args.split, seed=a.seed, fps=a.fps, scene=args.scene)
     print(f"video: {path}")
     return 0

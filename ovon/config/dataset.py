@@ -1,56 +1,65 @@
-"""Episode-generation configs (dataset.md). `paper` follows the paper; `fast` is for CPU demos/tests."""
+"""Episode-generation configs (dataset.md). `paper` follows the paper; `fast` is for CPU demos/tests.
+
+Every field has a declared domain (`ovon.config.base`): a negative episode count, a 0-pixel render or a
+0 m viewpoint grid is refused before any scene is loaded."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import ClassVar, Literal
+
+from ovon.config.base import Range, in_range, less, non_empty, non_negative, positive
 
 
 @dataclass(frozen=True)
 class ViewpointConfig:
-    render_size: int = 512  # square frames for generation
-    hfov_deg: float = 90.0
-    camera_height: float = 1.31
-    grid_step: float = 0.25
-    max_distance: float = 1.0  # viewpoints within this of the object's oriented box
-    tilts_deg: tuple[float, ...] = (-30.0, 0.0, 30.0)
-    min_score: float = 0.05  # keep viewpoints whose summed coverage exceeds this
-    goal_min_coverage: float = 0.05  # an object is a goal if seen at > 5% of the frame from some viewpoint
-    backend: str = "auto"
-    max_viewpoints: int = 0  # 0 = keep all; else the best N (file size)
+    render_size: int = in_range(512, 8, 4096)  # square frames for generation
+    hfov_deg: float = in_range(90.0, 0.0, 180.0, lo_open=True, hi_open=True)
+    camera_height: float = in_range(1.31, 0.0, 5.0, lo_open=True)
+    grid_step: float = in_range(0.25, 0.01, 5.0)
+    max_distance: float = positive(1.0)  # viewpoints within this of the object's oriented box
+    tilts_deg: tuple[float, ...] = non_empty((-30.0, 0.0, 30.0), each=Range(-90.0, 90.0))
+    min_score: float = in_range(0.05, 0.0, 1.0, hi_open=True)  # keep viewpoints whose summed coverage exceeds this
+    # an object is a goal if seen at > 5% of the frame from some viewpoint
+    goal_min_coverage: float = in_range(0.05, 0.0, 1.0, hi_open=True)
+    backend: Literal["auto", "gl", "embree"] = "auto"
+    max_viewpoints: int = non_negative(0)  # 0 = keep all; else the best N (file size)
 
 
 @dataclass(frozen=True)
 class StartConfig:
-    min_island_radius: float = 1.5
-    min_geodesic: float = 1.0
-    max_geodesic: float = 30.0
-    max_height_span: float = 0.25  # single floor: the path's height range
-    min_geo_euclid_ratio: float = 1.0  # paper's optional hard rule uses 1.05
+    min_island_radius: float = non_negative(1.5)
+    min_geodesic: float = non_negative(1.0)
+    max_geodesic: float = positive(30.0)
+    max_height_span: float = non_negative(0.25)  # single floor: the path's height range
+    min_geo_euclid_ratio: float = non_negative(1.0)  # paper's optional hard rule uses 1.05
     pointnav_ratio_rejection: bool = True  # keep w.p. 20*(r-0.98)^2 when r < 1.1
-    max_tries: int = 2000
+    max_tries: int = in_range(2000, 1, 10_000_000)
     oracle_check: bool = True  # keep a start only if the shortest-path oracle finishes from it (grid rollout)
+
+    rules: ClassVar = (less("min_geodesic", "max_geodesic"),)
 
 
 @dataclass(frozen=True)
 class SplitGenConfig:
-    seed: int = 0
-    holdout_fraction: float = 0.25
-    similarity_threshold: float = 0.68
+    seed: int = non_negative(0)
+    holdout_fraction: float = in_range(0.25, 0.0, 1.0, lo_open=True, hi_open=True)
+    similarity_threshold: float = in_range(0.68, -1.0, 1.0)
     children: bool = True  # children_object_categories from synonym families (splits.children_for)
     # Children = same shape family AND text similarity >= this. Higher than the split threshold because at
     # 0.68 a third of the categories get children ("bathroom cabinet" -> five other cabinets).
-    children_threshold: float = 0.8
+    children_threshold: float = in_range(0.8, -1.0, 1.0)
 
 
 @dataclass(frozen=True)
 class GenerationConfig:
-    seed: int = 0
-    episodes_per_train_scene: int = 50_000
-    episodes_per_val_split: int = 3_000  # released val splits hold 3000 episodes each
+    seed: int = non_negative(0)
+    episodes_per_train_scene: int = in_range(50_000, 1, 10_000_000)
+    episodes_per_val_split: int = in_range(3_000, 1, 10_000_000)  # released val splits hold 3000 episodes each
     viewpoints: ViewpointConfig = field(default_factory=ViewpointConfig)
     starts: StartConfig = field(default_factory=StartConfig)
     splits: SplitGenConfig = field(default_factory=SplitGenConfig)
-    decimals: int = 6  # positions rounded for stable, compact files
+    decimals: int = in_range(6, 1, 15)  # positions rounded for stable, compact files
 
 
 def paper_generation() -> GenerationConfig:

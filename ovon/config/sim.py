@@ -1,21 +1,26 @@
-"""Simulator configs: the Stretch embodiment of task.md and the navigability grid."""
+"""Simulator configs: the Stretch embodiment of task.md and the navigability grid.
+
+Every field has a declared domain (`ovon.config.base`); the bounds are what the simulator can run
+(a 0-wide camera, a 0 m step or a 180 deg field of view are refused before any work)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import ClassVar, Literal
+
+from ovon.config.base import in_range, less, non_negative, positive
 
 
 @dataclass(frozen=True)
 class AgentConfig:
-    radius: float = 0.17
-    height: float = 1.41
-    max_climb: float = 0.10
-    forward_step: float = 0.25
-    turn_angle_deg: float = 30.0
-    look_angle_deg: float = 30.0
-    min_pitch_deg: float = -60.0
-    max_pitch_deg: float = 60.0
+    radius: float = in_range(0.17, 0.0, 2.0, lo_open=True)
+    height: float = in_range(1.41, 0.0, 5.0, lo_open=True)
+    max_climb: float = in_range(0.10, 0.0, 2.0)
+    forward_step: float = in_range(0.25, 0.0, 5.0, lo_open=True)
+    turn_angle_deg: float = in_range(30.0, 0.0, 180.0, lo_open=True)
+    look_angle_deg: float = in_range(30.0, 0.0, 90.0, lo_open=True)
+    min_pitch_deg: float = in_range(-60.0, -90.0, 0.0)
+    max_pitch_deg: float = in_range(60.0, 0.0, 90.0)
     allow_sliding: bool = False
 
 
@@ -23,12 +28,12 @@ class AgentConfig:
 class CameraConfig:
     """Task rig: 360 wide x 640 tall portrait, HFOV 42 deg, 1.31 m high (paper); CPU presets shrink it."""
 
-    width: int = 360
-    height: int = 640
-    hfov_deg: float = 42.0
-    camera_height: float = 1.31
-    min_depth: float = 0.5
-    max_depth: float = 5.0
+    width: int = in_range(360, 1, 4096)
+    height: int = in_range(640, 1, 4096)
+    hfov_deg: float = in_range(42.0, 0.0, 180.0, lo_open=True, hi_open=True)
+    camera_height: float = in_range(1.31, 0.0, 5.0, lo_open=True)
+    min_depth: float = non_negative(0.5)
+    max_depth: float = positive(5.0)
     backend: Literal["auto", "gl", "embree"] = "auto"
     # Render the RGB channel. Off when no consumer reads it (oracle encoders need depth + semantic):
     # saves the colour pass and its read-back. Depth and the semantic frame are always rendered.
@@ -37,22 +42,25 @@ class CameraConfig:
     # frames are bitwise identical either way; off is the reference path (tests, benchmarks).
     cull: bool = True
 
+    rules: ClassVar = (less("min_depth", "max_depth"),)
+
 
 @dataclass(frozen=True)
 class NavConfig:
-    cell_size: float = 0.05
-    cell_height: float = 0.05
-    max_slope_deg: float = 30.0
-    floor_separation: float = 1.0  # walkable surfaces more than this apart in y are separate floors
+    # Lower bounds keep the grid finite: 1 cm cells already mean 10^6 cells per 10 m x 10 m floor.
+    cell_size: float = in_range(0.05, 0.01, 1.0)
+    cell_height: float = in_range(0.05, 0.01, 1.0)
+    max_slope_deg: float = in_range(30.0, 0.0, 90.0, hi_open=True)
+    floor_separation: float = positive(1.0)  # walkable surfaces more than this apart in y are separate floors
 
 
 @dataclass(frozen=True)
 class NoiseConfig:
     actuation: Literal["none", "gaussian", "ilqr", "proportional", "movebase"] = "none"
-    actuation_multiplier: float = 1.0
+    actuation_multiplier: float = in_range(1.0, 0.0, 100.0)
     odometry: bool = False
-    odometry_position_m: float = 0.007
-    odometry_heading_deg: float = 2.0
+    odometry_position_m: float = non_negative(0.007)
+    odometry_heading_deg: float = non_negative(2.0)
 
 
 @dataclass(frozen=True)

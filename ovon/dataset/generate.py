@@ -28,6 +28,7 @@ from ovon.atomic import atomic_write_text, write_json_gz
 from ovon.config.base import from_dict, to_dict
 from ovon.config.dataset import GenerationConfig
 from ovon.config.sim import AgentConfig, CameraConfig, NavConfig
+from ovon.dataset.generation_folder import generation_run_folder
 from ovon.dataset.io import shard_exists, write_scene_shard, write_split_shell
 from ovon.dataset.records import Episode, ObjectGoal, ViewPoint, goal_key
 from ovon.geometry import quat_to_yaw, yaw_to_quat
@@ -291,6 +292,7 @@ class GenerationReport:
     goal_seconds: list = field(default_factory=list)
 
 
+@generation_run_folder  # identity, resume check and lock of the output folder (ovon.runfolder)
 def generate(
     scenes_dir: str | Path,
     out: str | Path,

@@ -29,6 +29,8 @@ SPLIT_ALIASES: dict[str, str] = {
     "val_unseen": "val_unseen_hard",
 }
 SHARD_SUFFIX = ".json.gz"
+# A split is a folder under the dataset root: a plain name, never a path that could leave the root.
+SPLIT_NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]*"
 
 
 @dataclass
@@ -74,7 +76,10 @@ def _read_json_gz(path: Path) -> Any:
     try:
         return json.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise DatasetError(f"{path}: not valid JSON ({e})") from None
+        raise DatasetError(f"{path}: not valid JSON ({e}); fix: regenerate or re-download the file") from None
+    except RecursionError:
+        raise DatasetError(f"{path}: JSON nested too deeply to be an episode file; fix: regenerate or "
+                           "re-download the file") from None
 
 
 def parse_shard(doc: Any, require_goals: bool = True) -> SceneEpisodes:
@@ -210,6 +215,17 @@ class EpisodeDataset:
         if not path.is_file():
             raise FileNotFoundError(f"no shard for scene {scene!r} in {self.content_dir}")
         return read_shard(path)
+
+    def files(self) -> list[Path]:
+        """The files that hold this split's episodes (shell + shards), for content hashes."""
+        out = [self.shell_path] if self.shell_path.is_file() else []
+        return out + [self.shard_path(s) for s in self.scenes()]
+
+    def fingerprint(self) -> str:
+        """Content hash of the split (names and bytes of its files): a run folder's input identity."""
+        from ovon.runfolder import files_sha256
+
+        return files_sha256(self.split_dir, [p.relative_to(self.split_dir) for p in self.files()])
 
     def iter_scenes(self) -> Iterator[tuple[str, SceneEpisodes]]:
         """(scene, shard) pairs, one shard in memory at a time."""

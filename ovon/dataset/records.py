@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import math
 import os
+import posixpath
 from dataclasses import dataclass, field
-from pathlib import Path, PurePosixPath
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 SCENE_DATASETS_PREFIX = "data/scene_datasets/"
@@ -293,9 +294,34 @@ def strip_scene_prefix(scene_id: str) -> str:
     return s
 
 
+def confined_scene_id(scene_id: str, scenes_root: str | Path) -> str:
+    """The episode's scene id as a normalised path relative to the scenes root.
+
+    Why: episode files come from elsewhere; they must not choose which files are read. `..` that climbs
+    out of the root, and absolute paths outside it, are a DatasetError (an absolute path inside the
+    root, or one containing `data/scene_datasets/`, is made relative)."""
+    raw = str(scene_id)
+    s = strip_scene_prefix(raw)
+    fix = ("fix: scene ids must be paths inside the scenes root (e.g. hm3d/val/00800-TEEsavR23oF/TEEsavR23oF"
+           ".basis.glb); correct the episode file, or pass the scenes root that holds it")
+    if "\0" in s or not s.strip():
+        raise DatasetError(f"scene_id {raw!r} is not a path; {fix}")
+    if posixpath.isabs(s) or PureWindowsPath(s).drive:
+        root = posixpath.normpath(Path(os.path.abspath(scenes_root)).as_posix())
+        norm = posixpath.normpath(s)
+        if norm != root and not norm.startswith(root.rstrip("/") + "/"):
+            raise DatasetError(f"scene_id {raw!r} is an absolute path outside the scenes root {root}; {fix}")
+        s = norm[len(root):].lstrip("/")
+    rel = posixpath.normpath(s)
+    if rel in (".", "") or rel == ".." or rel.startswith("../"):
+        raise DatasetError(f"scene_id {raw!r} points outside the scenes root {scenes_root} ({rel!r} after "
+                           f"normalisation); {fix}")
+    return rel
+
+
 def scene_path_candidates(scene_id: str, scenes_root: str | Path) -> list[Path]:
-    """Every path `resolve_scene_path` tries, in order."""
-    rel = PurePosixPath(strip_scene_prefix(scene_id))
+    """Every path `resolve_scene_path` tries, in order (all inside `scenes_root`)."""
+    rel = PurePosixPath(confined_scene_id(scene_id, scenes_root))
     root = Path(scenes_root)
     rels = [rel]
     if len(rel.parts) > 1:
@@ -311,9 +337,8 @@ def scene_path_candidates(scene_id: str, scenes_root: str | Path) -> list[Path]:
 
 def resolve_scene_path(scene_id: str, scenes_root: str | Path) -> Path:
     """Scene file for an episode's `scene_id` under the scene-datasets root (Habitat's
-    `data/scene_datasets`, or the dataset folder itself); falls back from `.basis.glb` to `.glb`."""
-    if os.path.isabs(scene_id) and Path(scene_id).is_file():
-        return Path(scene_id)
+    `data/scene_datasets`, or the dataset folder itself); falls back from `.basis.glb` to `.glb`.
+    Never outside the root (see `confined_scene_id`)."""
     tried = scene_path_candidates(scene_id, scenes_root)
     for p in tried:
         if p.is_file():

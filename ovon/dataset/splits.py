@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ovon.atomic import write_json
+from ovon.config.base import in_range, non_empty, validate
 from ovon.dataset.io import SPLIT_ALIASES
 from ovon.dataset.records import DatasetError
 from ovon.models.text_minilm import MODEL_NAME, TextEncoder
@@ -36,11 +37,12 @@ def canonical_split(split: str) -> str:
 
 @dataclass
 class SplitConfig:
-    seed: int = 0
-    holdout_fraction: float = 0.25  # share of categories sampled as unseen candidates
-    similarity_threshold: float = 0.68  # max cosine to train >= this -> val_seen_synonyms
-    val_scene_fraction: float = 0.2  # paper: 36 of 181 scenes are val
-    model: str = MODEL_NAME
+    seed: int = in_range(0, 0, 2**32 - 1)
+    # share of categories sampled as unseen candidates
+    holdout_fraction: float = in_range(0.25, 0.0, 1.0, lo_open=True, hi_open=True)
+    similarity_threshold: float = in_range(0.68, -1.0, 1.0)  # max cosine to train >= this -> val_seen_synonyms
+    val_scene_fraction: float = in_range(0.2, 0.0, 1.0, lo_open=True, hi_open=True)  # paper: 36 of 181 scenes
+    model: str = non_empty(MODEL_NAME)
 
 
 @dataclass(frozen=True)
@@ -125,10 +127,13 @@ class CategorySplit:
 
 def load_category_split(path: str | Path) -> CategorySplit:
     path = Path(path)
+    fix = "fix: pass a categories.json written by `ovon dataset splits`"
     try:
-        doc = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise DatasetError(f"{path}: not valid JSON ({e})") from None
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
+        raise DatasetError(f"{path}: not valid JSON ({type(e).__name__}); {fix}") from None
+    if not isinstance(doc, dict):
+        raise DatasetError(f"{path}: expected a JSON object with train / val_seen_synonyms / val_unseen; {fix}")
     return CategorySplit.from_json(doc, source=str(path))
 
 
@@ -143,7 +148,7 @@ def split_categories(
     threshold, else to val_unseen. `force_holdout` categories are always candidates (tests, audits);
     the rest of the quota is sampled from the other categories. The result does not depend on the
     input order."""
-    cfg = cfg or SplitConfig()
+    cfg = validate(cfg or SplitConfig())
     cats = sorted(set(categories))
     forced = sorted(set(force_holdout))
     unknown = [c for c in forced if c not in cats]

@@ -1,88 +1,172 @@
 """`ovon evaluate`: agents over splits and seeds, episodes in worker processes (or Ray tasks), one JSON
-line per episode as it finishes, resumable, then a summary and the paper-style table."""
+line per episode as it finishes, resumable, then a summary and the paper-style table.
+
+Before any work: the config is validated (declared domains), the agent is built once, every episode is
+checked (`ovon.dataset.validate`: bad ones are skipped with a counted warning, starts off the navigable
+map included) and the run folder is opened (`ovon.runfolder`: identity compared on resume, lock against a
+second writer). Records are then written as episodes finish and rewritten in canonical order at the end.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 from ovon.atomic import atomic_write_text
-from ovon.config.base import merge, parse_overrides, to_dict
+from ovon.config.base import (
+    ExistingDir,
+    NonNegative,
+    Pattern,
+    constrained,
+    in_range,
+    merge,
+    non_empty,
+    parse_overrides,
+    positive,
+    to_dict,
+    validate,
+)
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
-from ovon.evaluate.results import RecordWriter, paper_table, read_records, record_key, summarize
+from ovon.dataset.io import SPLIT_NAME_PATTERN
+from ovon.evaluate.results import RecordWriter, paper_table, read_records, record_key, summarize, write_canonical
 from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
 DEFAULT_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
+SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
+# Settings that may differ between the sessions of one run folder: they change what is run or how fast,
+# never the result of an episode (paths are compared through their normalised identities instead).
+MAY_CHANGE = ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "chunk", "name",
+              "agent_kwargs.checkpoint")
 
 
 @dataclass
 class EvalConfig:
-    agent: str = "random"
+    agent: str = non_empty("random", flag="--agent")
     agent_kwargs: dict = field(default_factory=dict)
-    data: str = "data/datasets/ovon"
-    scenes: str = "data/scene_datasets"
-    splits: tuple[str, ...] = DEFAULT_SPLITS
-    seeds: tuple[int, ...] = (0,)
-    episodes: int | None = None  # per split; None = all
-    workers: int = 1
-    executor: str = "process"  # process | ray
-    chunk: int = 4  # episodes per work unit (same scene)
+    data: str = constrained("data/datasets/ovon", ExistingDir(), flag="--data")
+    scenes: str = constrained("data/scene_datasets", ExistingDir(), flag="--scenes")
+    splits: tuple[str, ...] = non_empty(DEFAULT_SPLITS, each=SPLIT_NAME, distinct=True, flag="--splits")
+    seeds: tuple[int, ...] = non_empty((0,), each=NonNegative(), distinct=True, flag="--seeds")
+    episodes: int | None = positive(None, flag="--episodes")  # per split; None = all
+    workers: int = in_range(1, 1, 1024, flag="--workers")
+    executor: Literal["process", "ray"] = constrained("process", flag="--executor")
+    chunk: int = in_range(4, 1, 100_000)  # episodes per work unit (same scene)
     sim: SimConfig = field(default_factory=lambda: SimConfig(camera=CameraConfig(width=160, height=120)))
     task: TaskConfig = field(default_factory=TaskConfig)
-    name: str | None = None  # row name in tables; default = agent
+    name: str | None = non_empty(None, flag="--name")  # row name in tables; default = agent
 
 
 def parse_noise(spec: str | None) -> NoiseConfig:
     """`actuation,odometry`, `actuation:movebase`, `actuation:ilqr*2` (multiplier) or empty."""
+    from ovon.config.base import ConfigError
+
     cfg = NoiseConfig()
     if not spec:
         return cfg
+    models = typing.get_args(typing.get_type_hints(NoiseConfig)["actuation"])
+    fix = "fix: use e.g. --noise actuation,odometry or --noise actuation:movebase*0.5"
     for item in [s.strip() for s in spec.split(",") if s.strip()]:
         name, _, arg = item.partition(":")
         if name == "actuation":
             model, _, mult = (arg or "ilqr").partition("*")
-            cfg = dataclasses.replace(cfg, actuation=model, actuation_multiplier=float(mult or 1.0))
-        elif name == "odometry":
+            if model not in models:
+                raise ConfigError(f"--noise {item!r}: unknown actuation model {model!r}, expected one of "
+                                  f"{', '.join(models)}; {fix}")
+            try:
+                k = float(mult or 1.0)
+            except ValueError:
+                raise ConfigError(f"--noise {item!r}: multiplier {mult!r} is not a number; {fix}") from None
+            cfg = dataclasses.replace(cfg, actuation=model, actuation_multiplier=k)
+            if not 0 <= k <= 100:
+                raise ConfigError(f"--noise {item!r}: multiplier {k:g} is outside [0, 100]; {fix}")
+        elif name == "odometry" and not arg:
             cfg = dataclasses.replace(cfg, odometry=True)
         else:
-            raise ValueError(
-                f"unknown noise {item!r}: use actuation[:ilqr|proportional|movebase|gaussian][*k], odometry"
-            )
-    if cfg.actuation not in ("none", "gaussian", "ilqr", "proportional", "movebase"):
-        raise ValueError(f"unknown actuation model {cfg.actuation!r}")
-    return cfg
+            raise ConfigError(f"--noise: unknown noise {item!r}, expected actuation[:ilqr|proportional|movebase|"
+                              f"gaussian][*k] or odometry; {fix}")
+    return validate(cfg, "sim.noise")
 
 
 def apply_overrides(cfg: EvalConfig, overrides: list[str]) -> EvalConfig:
+    from ovon.config.base import ConfigError
+
     data = parse_overrides(overrides)
     sim = merge(cfg.sim, data.pop("sim"), "sim") if "sim" in data else cfg.sim
     task = merge(cfg.task, data.pop("task"), "task") if "task" in data else cfg.task
     if data:
-        raise ValueError(f"unknown override group(s) {sorted(data)}: use sim.* or task.*")
+        raise ConfigError(f"unknown override group(s) {sorted(data)}; fix: --set takes sim.* or task.* keys here "
+                          "(e.g. --set task.max_steps=300); the other settings have their own options")
     return dataclasses.replace(cfg, sim=sim, task=task)
 
 
 def load_specs(data: str, scenes: str, split: str, limit: int | None) -> list[EpisodeSpec]:
-    """Episodes of a split as `EpisodeSpec`s, spread round-robin over scenes when limited."""
+    """Episodes of a split as `EpisodeSpec`s, spread round-robin over scenes when limited.
+
+    Episodes that fail validation (`ovon.dataset.validate.usable_episodes`) are skipped with one counted
+    warning; a split without episodes, or a scene id outside `scenes`, is an error."""
+    from collections import Counter
+
     from ovon.dataset.io import EpisodeDataset, goals_for
-    from ovon.dataset.records import resolve_scene_path
+    from ovon.dataset.records import DatasetError, resolve_scene_path
+    from ovon.dataset.validate import split_problem, usable_episodes, warn_skipped
+    from ovon.runfolder import path_identity
     from ovon.task.episode import spec_from_episode
 
     ds = EpisodeDataset(data, split)
+    why = split_problem(ds)
+    if why:
+        raise DatasetError(f"split {split!r}: {why}; fix: pass a dataset written by `ovon dataset generate` or "
+                           "the released HM3D-OVON files")
     per_scene: list[list[EpisodeSpec]] = []
+    skipped: Counter = Counter()
+    total = 0
     for scene in ds.scenes():
         shard = ds.load_scene(scene)
-        specs = []
-        for ep in shard.episodes:
-            path = str(resolve_scene_path(ep.scene_id, scenes))
-            specs.append(spec_from_episode(ep, goals_for(ep, shard.goals_by_category), path, split))
-        per_scene.append(specs)
+        paths: dict[str, str] = {}
+        for ep in shard.episodes:  # a scene id outside the root refuses the file, whatever else is wrong
+            if ep.scene_id not in paths:
+                try:
+                    paths[ep.scene_id] = path_identity(resolve_scene_path(ep.scene_id, scenes))
+                except DatasetError as e:
+                    raise DatasetError(f"{ds.shard_path(scene)}: episode {ep.episode_id!r}: {e}") from None
+        episodes, bad = usable_episodes(shard)
+        total += len(shard.episodes)
+        skipped.update(bad)
+        per_scene.append([spec_from_episode(ep, goals_for(ep, shard.goals_by_category), paths[ep.scene_id], split)
+                          for ep in episodes])
+    warn_skipped(f"{ds.content_dir}", skipped, total)
     out = [p[i] for i in range(max(map(len, per_scene), default=0)) for p in per_scene if i < len(p)]
     return out if limit is None else out[:limit]
+
+
+def drop_off_map_starts(specs: list[EpisodeSpec], sim: SimConfig, workers: int = 1,
+                        executor: str = "process", where: str = "") -> list[EpisodeSpec]:
+    """`specs` without the episodes whose start is off the navigable map of their scene (for this agent's
+    radius and the nav grid of `sim`), skipped with one counted warning. One job per scene."""
+    from collections import Counter
+
+    from ovon.dataset.validate import off_map_starts_job, warn_skipped
+
+    by_scene: dict[str, list[int]] = {}
+    for i, s in enumerate(specs):
+        if s.start_position is not None:
+            by_scene.setdefault(s.scene, []).append(i)
+    jobs = [{"scene": sc, "starts": [[float(x) for x in specs[i].start_position] for i in idx],
+             "agent": to_dict(sim.agent), "nav": to_dict(sim.nav)} for sc, idx in sorted(by_scene.items())]
+    bad: set[int] = set()
+    # A pool costs seconds to start: worth it only when there are many scenes to load.
+    many = len(jobs) > 4
+    for res in run_jobs(off_map_starts_job, jobs, workers if many else 1, executor if many else "process"):
+        idx = by_scene[res["scene"]]
+        bad.update(idx[j] for j in res["bad"])
+    warn_skipped(where or "episodes", Counter({"start_off_map": len(bad)}), len(specs))
+    return [s for i, s in enumerate(specs) if i not in bad]
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -140,33 +224,76 @@ def _units(cfg: EvalConfig, specs_by_split: dict[str, list[EpisodeSpec]], done: 
     return units
 
 
-def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
-    run_dir = Path(run_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    specs_by_split = {s: load_specs(cfg.data, cfg.scenes, s, cfg.episodes) for s in cfg.splits}
-    for split, specs in specs_by_split.items():
+def run_inputs(cfg: EvalConfig) -> dict:
+    """Identities of what an evaluation reads: the dataset's splits (content hashes), the scenes root and
+    the policy checkpoint (content hash)."""
+    from ovon.dataset.io import EpisodeDataset
+    from ovon.runfolder import file_sha256, path_identity
+
+    inputs: dict = {
+        "data": {"path": path_identity(cfg.data),
+                 "splits": {s: EpisodeDataset(cfg.data, s).fingerprint() for s in cfg.splits}},
+        "scenes": {"path": path_identity(cfg.scenes)},
+    }
+    ckpt = cfg.agent_kwargs.get("checkpoint")
+    if isinstance(ckpt, str) and ckpt:
+        p = Path(ckpt) / "policy.pt" if Path(ckpt).is_dir() else Path(ckpt)
+        if p.is_file():
+            inputs["checkpoint"] = {"path": path_identity(p), "sha256": file_sha256(p)}
+    return inputs
+
+
+def prepare(cfg: EvalConfig, workers: int | None = None) -> dict[str, list[EpisodeSpec]]:
+    """Everything that can refuse a run, before any episode: config domains, the agent, the episodes."""
+    from ovon.agents import check_agent
+    from ovon.dataset.records import DatasetError
+
+    validate(cfg)
+    check_agent(cfg.agent, cfg.agent_kwargs)
+    specs_by_split = {}
+    for split in cfg.splits:
+        specs = load_specs(cfg.data, cfg.scenes, split, cfg.episodes)
+        specs = drop_off_map_starts(specs, cfg.sim, workers or cfg.workers, cfg.executor, f"{cfg.data}/{split}")
         if not specs:
-            raise ValueError(f"split {split!r} in {cfg.data} has no episodes")
-    atomic_write_text(run_dir / "run.json", json.dumps({**to_dict(cfg), "name": cfg.name or cfg.agent}, indent=2))
-    done = {record_key(r) for r in read_records(run_dir, repair=True)}
-    units = _units(cfg, specs_by_split, done)
-    total = sum(len(u["specs"]) for u in units)
-    writer = RecordWriter(run_dir)
-    try:
-        with progress_bar(f"evaluate {cfg.name or cfg.agent}", total, progress and total > 0) as bar:
-            for recs in run_jobs(run_unit, units, cfg.workers, cfg.executor):
-                for r in recs:
-                    writer.write(r)
-                bar.advance(len(recs))
-    finally:
-        writer.close()
-    return finalize(run_dir, cfg.name or cfg.agent)
+            raise DatasetError(f"split {split!r} in {cfg.data} has no usable episodes; fix: run `ovon dataset "
+                               f"validate {cfg.data} --scenes {cfg.scenes}` to see why")
+        specs_by_split[split] = specs
+    return specs_by_split
 
 
-def finalize(run_dir: str | Path, name: str) -> dict:
-    """Summary JSON and the table, from whatever the jsonl holds (so it is identical after a resume)."""
+def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
+    from ovon.runfolder import RunFolder
+
+    specs_by_split = prepare(cfg)
     run_dir = Path(run_dir)
-    records = read_records(run_dir)
+    with RunFolder.open(run_dir, "evaluate", to_dict(cfg), run_inputs(cfg), may_change=MAY_CHANGE,
+                        markers=("episodes.jsonl",)):
+        atomic_write_text(run_dir / "run.json",
+                          json.dumps({**to_dict(cfg), "name": cfg.name or cfg.agent}, indent=2))
+        done = {record_key(r) for r in read_records(run_dir, repair=True)}
+        units = _units(cfg, specs_by_split, done)
+        total = sum(len(u["specs"]) for u in units)
+        writer = RecordWriter(run_dir)
+        try:
+            with progress_bar(f"evaluate {cfg.name or cfg.agent}", total, progress and total > 0) as bar:
+                for recs in run_jobs(run_unit, units, cfg.workers, cfg.executor):
+                    for r in recs:
+                        writer.write(r)
+                    bar.advance(len(recs))
+        finally:
+            writer.close()
+        wanted = {(split, int(seed), s.scene, s.episode_id)
+                  for seed in cfg.seeds for split, specs in specs_by_split.items() for s in specs}
+        return finalize(run_dir, cfg.name or cfg.agent, wanted)
+
+
+def finalize(run_dir: str | Path, name: str, wanted: set | None = None) -> dict:
+    """episodes.jsonl in canonical order, then the summary and the table of the records in `wanted` (all
+    when None), in that order: identical whatever the workers, the executor or the interruptions."""
+    run_dir = Path(run_dir)
+    records = write_canonical(run_dir, read_records(run_dir))
+    if wanted is not None:
+        records = [r for r in records if record_key(r) in wanted]
     summary = {"name": name, "splits": summarize(records)}
     atomic_write_text(run_dir / "summary.json", json.dumps(summary, indent=2, sort_keys=True))
     atomic_write_text(run_dir / "table.md", paper_table({name: summary["splits"]}) + "\n")

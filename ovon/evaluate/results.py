@@ -1,60 +1,159 @@
-"""The run folder: an append-only `episodes.jsonl` (resumable) and its aggregation into summaries."""
+"""The run folder's records: an append-only `episodes.jsonl` (resumable), its repair, its canonical order
+and its aggregation into summaries.
+
+Why a canonical order: workers finish episodes in any order; records are appended as they come (so a
+kill loses at most the episode in flight) and rewritten in (split, seed, scene, episode) order when the
+run finishes, and summaries are computed in that order, so 1 or N workers, processes or Ray give
+byte-identical files. Why set lines aside: a torn or unparsable line (a kill mid-write, a disk error, a
+hand edit) must never cost the complete records after it; it is moved to `episodes.rejected.jsonl`.
+"""
 
 from __future__ import annotations
 
 import json
 import math
 import os
+import warnings
 from collections import defaultdict
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from ovon.atomic import atomic_write_bytes
+
 EPISODES_FILE = "episodes.jsonl"
+REJECTED_FILE = "episodes.rejected.jsonl"
+SPLIT_ORDER = ("val_seen", "val_seen_synonyms", "val_unseen")
+_NUMBERS = ("spl", "soft_spl", "distance_to_goal", "steps", "collisions")
+
+
+class RecordWarning(UserWarning):
+    """Lines of episodes.jsonl set aside (torn, unparsable, not a record, or a duplicate)."""
 
 
 def record_key(r: dict) -> tuple:
     return (r["split"], int(r["seed"]), r["scene"], str(r["episode_id"]))
 
 
+def _natural(s: str) -> tuple:
+    return (0, int(s), "") if s.isdigit() else (1, 0, s)
+
+
+def canonical_key(r: dict) -> tuple:
+    """Sort key: splits in the paper's order, then seed, scene, episode id (numeric ids by value)."""
+    split = r["split"]
+    rank = SPLIT_ORDER.index(split) if split in SPLIT_ORDER else len(SPLIT_ORDER)
+    return (rank, split, int(r["seed"]), r["scene"], _natural(str(r["episode_id"])))
+
+
+def record_problem(r: object) -> str | None:
+    """Why a parsed line is not an episode record, or None."""
+    if not isinstance(r, dict):
+        return "not a JSON object"
+    for k in ("split", "scene"):
+        if not isinstance(r.get(k), str):
+            return f"{k} is not a string"
+    if not isinstance(r.get("episode_id"), str | int) or isinstance(r.get("episode_id"), bool):
+        return "episode_id is not a string"
+    if not isinstance(r.get("seed"), int) or isinstance(r.get("seed"), bool):
+        return "seed is not an integer"
+    if not isinstance(r.get("success"), bool):
+        return "success is not true/false"
+    for k in _NUMBERS:
+        v = r.get(k)
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            return f"{k} is not a finite number"
+    if not (r.get("failure") is None or isinstance(r.get("failure"), str)):
+        return "failure is not a string"
+    return None
+
+
+def encode(record: dict) -> bytes:
+    """The one serialisation of a record (sorted keys: equal records give equal bytes)."""
+    return (json.dumps(record, sort_keys=True) + "\n").encode("utf-8")
+
+
+@dataclass
+class RecordFile:
+    """What `episodes.jsonl` holds: complete records (first per key) and the lines that are not."""
+
+    records: list[dict] = field(default_factory=list)
+    rejected: list[dict] = field(default_factory=list)  # {"line", "reason", "text"}
+
+
+def parse_records(data: bytes) -> RecordFile:
+    out = RecordFile()
+    seen: set[tuple] = set()
+    lines = data.split(b"\n")
+    torn_tail = lines[-1] != b""  # no newline at the end: the last write did not finish
+    if not torn_tail:
+        lines = lines[:-1]
+    for i, line in enumerate(lines, 1):
+        text = line.decode("utf-8", errors="replace")
+        if i == len(lines) and torn_tail:
+            out.rejected.append({"line": i, "reason": "torn (no end of line)", "text": text})
+            continue
+        if not line.strip():
+            continue
+        try:
+            r = json.loads(line)
+        except (ValueError, RecursionError) as e:
+            out.rejected.append({"line": i, "reason": f"unparsable ({type(e).__name__})", "text": text})
+            continue
+        why = record_problem(r)
+        if why:
+            out.rejected.append({"line": i, "reason": f"not a record: {why}", "text": text})
+            continue
+        k = record_key(r)
+        if k in seen:
+            out.rejected.append({"line": i, "reason": "duplicate of an earlier record", "text": text})
+            continue
+        seen.add(k)
+        out.records.append(r)
+    return out
+
+
 def read_records(run_dir: str | Path, repair: bool = False) -> list[dict]:
-    """Records written so far. A run killed mid-write can leave a torn last line: it is ignored (and cut
-    off the file when `repair`), so a resumed run re-runs exactly that episode."""
+    """Complete records of a run folder, in file order. Lines that are not (torn, unparsable, duplicates)
+    are skipped with a warning; with `repair` (only the holder of the run-folder lock) they are moved to
+    `episodes.rejected.jsonl` and the file is rewritten with the complete records only - never fewer."""
     path = Path(run_dir) / EPISODES_FILE
     if not path.exists():
         return []
     data = path.read_bytes()
-    records, good_end = [], 0
-    pos = 0
-    for line in data.splitlines(keepends=True):
-        pos += len(line)
-        if not line.endswith(b"\n"):
-            break
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            break
-        good_end = pos
-    if repair and good_end != len(data):
-        with open(path, "r+b") as f:
-            f.truncate(good_end)
-    # Keep the first record per key: a duplicate can only come from a crash between write and flush.
-    seen, unique = set(), []
-    for r in records:
-        k = record_key(r)
-        if k not in seen:
-            seen.add(k)
-            unique.append(r)
-    return unique
+    rf = parse_records(data)
+    if rf.rejected:
+        where = ", ".join(str(r["line"]) for r in rf.rejected[:10]) + (" ..." if len(rf.rejected) > 10 else "")
+        action = f"moved to {REJECTED_FILE}" if repair else "skipped"
+        warnings.warn(f"{path}: {len(rf.rejected)} line(s) that are not complete records {action} "
+                      f"(line {where}); {len(rf.records)} complete records kept", RecordWarning, stacklevel=2)
+        if repair:
+            side = Path(run_dir) / REJECTED_FILE
+            with open(side, "ab") as f:
+                for r in rf.rejected:
+                    f.write((json.dumps(r, sort_keys=True) + "\n").encode("utf-8"))
+                f.flush()
+                os.fsync(f.fileno())
+            atomic_write_bytes(path, b"".join(encode(r) for r in rf.records))
+    return rf.records
+
+
+def write_canonical(run_dir: str | Path, records: list[dict]) -> list[dict]:
+    """Rewrite episodes.jsonl with `records` in canonical order (atomically); returns them sorted."""
+    ordered = sorted(records, key=canonical_key)
+    atomic_write_bytes(Path(run_dir) / EPISODES_FILE, b"".join(encode(r) for r in ordered))
+    return ordered
 
 
 class RecordWriter:
-    """Single writer (the parent process); one line per episode, flushed and fsynced as it goes."""
+    """Single writer (the parent process, holding the run-folder lock); one line per episode, flushed and
+    fsynced as it goes."""
 
     def __init__(self, run_dir: str | Path):
         Path(run_dir).mkdir(parents=True, exist_ok=True)
-        self._f = open(Path(run_dir) / EPISODES_FILE, "a", encoding="utf-8")
+        self._f = open(Path(run_dir) / EPISODES_FILE, "ab")
 
     def write(self, record: dict) -> None:
-        self._f.write(json.dumps(record, sort_keys=True) + "\n")
+        self._f.write(encode(record))
         self._f.flush()
         os.fsync(self._f.fileno())
 
@@ -65,15 +164,18 @@ class RecordWriter:
 def _mean_std(values: list[float]) -> tuple[float, float]:
     if not values:
         return float("nan"), float("nan")
-    m = sum(values) / len(values)
-    var = sum((v - m) ** 2 for v in values) / len(values)
+    m = math.fsum(values) / len(values)
+    var = math.fsum((v - m) ** 2 for v in values) / len(values)
     return m, math.sqrt(var)
 
 
 def summarize(records: list[dict]) -> dict:
-    """Per split: per-seed means, then mean and std over seeds (the paper's table convention)."""
+    """Per split: per-seed means, then mean and std over seeds (the paper's table convention).
+
+    Sums are exact (`math.fsum`) over records in canonical order, so the numbers do not depend on the
+    order in which workers finished."""
     by_split: dict[str, dict[int, list[dict]]] = defaultdict(lambda: defaultdict(list))
-    for r in records:
+    for r in sorted(records, key=canonical_key):
         by_split[r["split"]][int(r["seed"])].append(r)
     out: dict = {}
     for split in sorted(by_split):
@@ -83,12 +185,12 @@ def summarize(records: list[dict]) -> dict:
             n = len(rs)
             per_seed[seed] = {
                 "episodes": n,
-                "sr": sum(r["success"] for r in rs) / n,
-                "spl": sum(r["spl"] for r in rs) / n,
-                "soft_spl": sum(r["soft_spl"] for r in rs) / n,
-                "distance_to_goal": sum(r["distance_to_goal"] for r in rs) / n,
-                "steps": sum(r["steps"] for r in rs) / n,
-                "collisions": sum(r["collisions"] for r in rs) / n,
+                "sr": math.fsum(float(r["success"]) for r in rs) / n,
+                "spl": math.fsum(r["spl"] for r in rs) / n,
+                "soft_spl": math.fsum(r["soft_spl"] for r in rs) / n,
+                "distance_to_goal": math.fsum(r["distance_to_goal"] for r in rs) / n,
+                "steps": math.fsum(r["steps"] for r in rs) / n,
+                "collisions": math.fsum(r["collisions"] for r in rs) / n,
             }
         entry: dict = {"seeds": per_seed}
         for metric in ("sr", "spl", "soft_spl", "distance_to_goal", "steps", "collisions"):
@@ -103,9 +205,6 @@ def summarize(records: list[dict]) -> dict:
         entry["episodes"] = sum(len(rs) for rs in seeds.values())
         out[split] = entry
     return out
-
-
-SPLIT_ORDER = ("val_seen", "val_seen_synonyms", "val_unseen")
 
 
 def paper_table(rows: dict[str, dict], splits: tuple[str, ...] = SPLIT_ORDER) -> str:

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar, Literal
+
+from ovon.config.base import Each, Positive, Range, constrained, in_range, non_empty, non_negative, positive, rule
 
 ImageEncoderName = Literal["oracle-vl", "siglip", "cnn"]
 TextEncoderName = Literal["minilm-text", "siglip-text"]
@@ -27,24 +29,30 @@ class EncoderConfig:
     image: ImageEncoderName = "oracle-vl"
     text: TextEncoderName = "minilm-text"
     # SigLIP: a hub id found in the local HF cache, or a folder written by `save_pretrained`.
-    siglip_model: str = "google/siglip-base-patch16-256"
+    siglip_model: str = non_empty("google/siglip-base-patch16-256")
     siglip_normalize: bool = True  # L2-normalise SigLIP embeddings (cosine-ready)
-    device: str = "cpu"
+    device: str = non_empty("cpu")
     # Oracle vision-language encoder (oracle perception).
-    oracle_grid: int = 2  # grid x grid spatial cells
+    oracle_grid: int = in_range(2, 1, 32)  # grid x grid spatial cells
     oracle_global: bool = True  # prepend the whole-frame pooled vector
-    oracle_depth_grid: tuple[int, int] = (0, 0)  # append coarse depth (rows, cols); (0, 0) = none
+    # Append coarse depth (rows, cols); (0, 0) = none.
+    oracle_depth_grid: tuple[int, int] = constrained((0, 0), Each(Range(0, 64)))
     # Append the collision flag of the last step (a bump sensor, not privileged). Low furniture right in
     # front of the agent is below the camera's view, so without it a blocked MOVE_FORWARD looks like a free one.
     oracle_collision: bool = False
-    oracle_noise_std: float = 0.0  # per-instance noise norm relative to the unit text embedding
-    oracle_dropout: float = 0.0  # probability that a visible instance is missed in a frame
-    oracle_seed: int = 0
+    oracle_noise_std: float = non_negative(0.0)  # per-instance noise norm relative to the unit text embedding
+    # Probability that a visible instance is missed in a frame.
+    oracle_dropout: float = in_range(0.0, 0.0, 1.0, hi_open=True)
+    oracle_seed: int = non_negative(0)
     # Small trainable CNN on RGB (+ depth).
-    cnn_dim: int = 256
-    cnn_channels: tuple[int, ...] = (32, 64, 128, 128)
+    cnn_dim: int = in_range(256, 1, 65536)
+    cnn_channels: tuple[int, ...] = non_empty((32, 64, 128, 128), each=Positive())
     cnn_depth: bool = False
-    cnn_max_depth: float = 5.0  # metres; depth is divided by this
+    cnn_max_depth: float = positive(5.0)  # metres; depth is divided by this
+
+    rules: ClassVar = (
+        rule(("oracle_depth_grid",), lambda g: (g[0] == 0) == (g[1] == 0), "oracle_depth_grid both 0 or both > 0"),
+    )
 
 
 @dataclass(frozen=True)
@@ -52,20 +60,20 @@ class PolicyConfig:
     """Policy over per-step embeddings: `[image, goal, prev action] -> Linear -> core -> heads`."""
 
     core: Literal["transformer", "lstm"] = "transformer"
-    hidden: int = 512
-    layers: int = 4
-    heads: int = 8
-    mlp: int = 1024
-    context: int = 100
-    prev_action_dim: int = 32
-    num_actions: int = 6
-    rope_base: float = 10000.0
-    norm_eps: float = 1e-6
+    hidden: int = in_range(512, 1, 65536)
+    layers: int = in_range(4, 1, 256)
+    heads: int = in_range(8, 1, 1024)
+    mlp: int = in_range(1024, 1, 262144)
+    context: int = in_range(100, 1, 100_000)
+    prev_action_dim: int = in_range(32, 0, 65536)
+    num_actions: int = in_range(6, 6, 6)  # STOP FORWARD LEFT RIGHT UP DOWN (task.md)
+    rope_base: float = positive(10000.0)
+    norm_eps: float = positive(1e-6)
     # Online acting of the transformer: "kv" = sliding-window key/value cache (O(context) per
     # step); "recompute" = re-run the window of stored inputs every step (O(context^2)).
     act_mode: Literal["kv", "recompute"] = "kv"
     # LSTM core width; 0 = chosen so the core's parameter count matches the transformer core's.
-    lstm_hidden: int = 0
+    lstm_hidden: int = in_range(0, 0, 65536)
     # Append, per text-aligned part of the image embedding (oracle-vl: global + grid cells; SigLIP:
     # the whole embedding), its dot product, cosine and norm against the unit goal embedding. This is
     # the image-text score a VLM agent computes anyway (VLFM's value map); a linear input layer cannot
@@ -74,7 +82,13 @@ class PolicyConfig:
     # Initial bias of the STOP logit (0 = a uniform initial policy). RL from scratch: a uniform policy
     # STOPs every 6th step, so early episodes end before the dense reward can teach anything (and the env
     # spends its time resetting); -4 makes a random STOP rare (~0.4% per step) without forbidding it.
-    stop_bias: float = 0.0
+    stop_bias: float = in_range(0.0, -100.0, 100.0)  # a logit: beyond +-100 softmax saturates in float32
+
+    # RoPE rotates pairs of channels of each head, so a head's width must be even.
+    rules: ClassVar = (
+        rule(("hidden", "heads"), lambda h, n: h % n == 0 and (h // n) % 2 == 0,
+             "hidden divisible by heads into an even head width"),
+    )
 
 
 def text_aligned_parts(cfg: EncoderConfig) -> int:
