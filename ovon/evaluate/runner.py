@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import zlib
 
 from ovon.agents.base import is_privileged
@@ -24,6 +25,9 @@ def run_episode(env, agent, spec: EpisodeSpec, seed: int, record_path: bool = Fa
             "split": spec.split,
             "goal": spec.goal_category,
             "seed": ep_seed,
+            # the robot's calibration (not privileged): camera intrinsics and body, for agents that map
+            "camera": dataclasses.asdict(unwrapped.sim_cfg.camera),
+            "embodiment": dataclasses.asdict(unwrapped.sim_cfg.agent),
         }
     )
     privileged = is_privileged(agent)
