@@ -148,9 +148,12 @@ def test_frontier_choice_hysteresis_and_anti_cycling():
     # ...from another spot it is
     ch.drop_target(blacklist=False)
     assert ch.choose(rows, cols, np.array([0.60, 0.52]), (51, 50)) == 0
-    # a blacklisted frontier is never chosen; none left -> None
+    # a blacklisted frontier is not chosen while others exist; when all are blacklisted, all are retried
     ch.drop_target(blacklist=True)
-    assert ch.choose(rows[:1], cols[:1], np.array([0.9]), (51, 50)) is None
+    assert ch.choose(rows, cols, np.array([0.9, 0.1]), (52, 50)) == 1
+    ch.drop_target(blacklist=True)
+    assert ch.choose(rows, cols, np.array([0.9, 0.1]), (52, 50)) == 0 and ch.cleared == 1 and not ch.blacklist
+    assert ch.choose(rows[:0], cols[:0], np.array([]), (52, 50)) is None
 
 
 def test_geometric_navigator_replans_around_new_obstacles_and_stops_near_the_goal():

@@ -1,8 +1,9 @@
 """`ovon demo` (`make demo`): the main job on the embedded world, end to end on a laptop CPU.
 
 Generates a small scene dataset and its val episodes if missing (fast preset), evaluates the random,
-shortest-path and frontier agents on the three val splits, prints the paper-style table and writes
-the report folder.
+shortest-path and frontier agents and the VLFM-style modular baseline (oracle detection, oracle-vl value:
+the one non-privileged-navigation agent that needs no training) on the three val splits, prints the
+paper-style table and writes the report folder.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-AGENTS = ("random", "shortest-path", "frontier")
+AGENTS = ("random", "shortest-path", "frontier", "vlfm")
 
 
 def register(sub) -> None:

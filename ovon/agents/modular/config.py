@@ -53,12 +53,13 @@ class LiftConfig:
     mask_erode_px: int = 1  # erode masks (edge pixels mix object and background depth); VLFM: 5 at 640x480
     box_shrink: float = 0.5  # box-only detections: keep the central part (fraction removed)
     max_points: int = 2000  # stored goal points per episode (oldest dropped first)
+    points_per_detection: int = 256  # evenly spaced subset of a detection's pixels (bounds the cost)
     min_range_m: float = 0.0  # ignore lifted points closer than this to the camera
     max_range_fraction: float = 0.95  # ignore points beyond this fraction of the depth range (no hit / far)
 
     def __post_init__(self) -> None:
-        if self.mask_erode_px < 0 or self.max_points < 1:
-            raise ValueError("lifting.mask_erode_px must be >= 0 and lifting.max_points >= 1")
+        if self.mask_erode_px < 0 or self.max_points < 1 or self.points_per_detection < 1:
+            raise ValueError("lifting.mask_erode_px must be >= 0, max_points and points_per_detection >= 1")
         if not 0.0 <= self.box_shrink < 1.0 or not 0.0 < self.max_range_fraction <= 1.0:
             raise ValueError("lifting.box_shrink must be in [0, 1) and lifting.max_range_fraction in (0, 1]")
 
@@ -72,10 +73,11 @@ class NavigatorConfig:
     turn_threshold_deg: float = 30.0  # turn when the next waypoint is more than this off the heading
     lookahead_m: float = 1.0  # furthest path cell in line of sight used as the heading target
     goal_ring_bins: int = 12  # plan to the nearest free cell in each of this many directions around a goal
+    escape_radius_m: float = 0.5  # on a cell its map blocks, the agent first heads to a free cell this close
     checkpoint: str = ""  # for learned navigators
 
     def __post_init__(self) -> None:
-        _positive(self, "navigator", ("stop_distance_m", "turn_threshold_deg", "lookahead_m"))
+        _positive(self, "navigator", ("stop_distance_m", "turn_threshold_deg", "lookahead_m", "escape_radius_m"))
         if self.goal_ring_bins < 1:
             raise ValueError(f"navigator.goal_ring_bins = {self.goal_ring_bins!r} must be >= 1")
 
@@ -112,12 +114,13 @@ class VLFMConfig(ModularConfig):
     value: ValueMapConfig = field(default_factory=ValueMapConfig)
     spin_steps: int = 12  # TURN_LEFT steps at the start (12 x 30 deg = a full turn)
     frontier_reached_m: float = 0.5  # a frontier this close counts as reached: choose again
-    stuck_steps: int = 20  # no progress toward a frontier for this many steps: abandon it for the episode
+    stuck_steps: int = 20  # no progress toward a frontier for this many steps: abandon it (blacklist)
+    max_choices_per_step: int = 8  # frontiers tried in one step when chosen ones turn out unreachable
     no_frontier: Literal["stop"] = "stop"  # what to do when no frontier is left (VLFM: STOP)
 
     def __post_init__(self) -> None:
-        if self.spin_steps < 0 or self.stuck_steps < 1:
-            raise ValueError("spin_steps must be >= 0 and stuck_steps >= 1")
+        if self.spin_steps < 0 or self.stuck_steps < 1 or self.max_choices_per_step < 1:
+            raise ValueError("spin_steps must be >= 0, stuck_steps and max_choices_per_step >= 1")
 
 
 @dataclass(frozen=True)

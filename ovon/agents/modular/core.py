@@ -8,6 +8,7 @@ Per step (`observe`): pose from odometry -> obstacle/explored/frontier maps from
 from __future__ import annotations
 
 import math
+import time
 import zlib
 
 import numpy as np
@@ -19,6 +20,11 @@ from ovon.agents.modular.navigation import NavRequest, PointGoalNavigator, make_
 from ovon.agents.modular.sensors import Pose2D, Sensors, pose_from_odometry
 from ovon.models.detectors import describe_detector, make_detector
 from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP
+
+
+def sensors_only(observation: dict) -> dict:
+    """The observation without the privileged channel: what maps, lifting and navigation may see."""
+    return {k: v for k, v in observation.items() if k != "privileged"}
 
 
 def episode_seed(info: dict) -> int:
@@ -41,6 +47,7 @@ class ModularCore:
         self.last_action: int | None = None
         self.detected = False  # the detector fired at least once this episode
         self.pose = Pose2D(0.0, 0.0, 0.0)
+        self.timing: dict[str, float] = {"maps": 0.0, "detect": 0.0}  # ms of the last `observe`, per phase
 
     @property
     def privileged(self) -> bool:
@@ -76,12 +83,15 @@ class ModularCore:
         r, c = self.maps.cell(pose.x, pose.z)
         if not self.maps.in_bounds(r, c):
             return False
+        t0 = time.perf_counter()
         depth = np.asarray(observation["depth"], dtype=np.float32)
         bumped = bool(observation.get("collided", 0)) and self.last_action == MOVE_FORWARD
         self.maps.update(depth, pose, self.pitch, bumped)
+        t1 = time.perf_counter()
         dets = self.detector.detect(observation, str(observation["goal"]))
         if dets and self.memory.add(dets, depth, pose, self.pitch):
             self.detected = True
+        self.timing = {"maps": (t1 - t0) * 1e3, "detect": (time.perf_counter() - t1) * 1e3}
         return True
 
     def goal_point(self) -> tuple[float, float] | None:
@@ -94,11 +104,11 @@ class ModularCore:
         if goal is None:
             return None
         assert self.navigator is not None and self.maps is not None
-        return self.navigator.act(observation, NavRequest(self.pose, goal, "goal", self.maps))
+        return self.navigator.act(sensors_only(observation), NavRequest(self.pose, goal, "goal", self.maps))
 
     def navigate_to(self, observation: dict, target: tuple[float, float]) -> int | None:
         assert self.navigator is not None and self.maps is not None
-        return self.navigator.act(observation, NavRequest(self.pose, target, "frontier", self.maps))
+        return self.navigator.act(sensors_only(observation), NavRequest(self.pose, target, "frontier", self.maps))
 
     def record(self, action: int) -> int:
         """Remember the action (bump sensor attribution, camera pitch); returns it."""
@@ -112,4 +122,4 @@ class ModularCore:
         return int(action)
 
 
-__all__ = ["ModularCore", "STOP", "episode_seed"]
+__all__ = ["ModularCore", "STOP", "episode_seed", "sensors_only"]

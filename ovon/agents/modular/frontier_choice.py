@@ -3,8 +3,10 @@ another is better by more than `hysteresis`; a frontier abandoned from a spot is
 spot (anti-cycling; VLFM hashes the robot position, the frontier and the top values for the same purpose).
 
 Frontiers that the navigator could not reach, or toward which the agent made no progress for `stuck_steps`
-steps, or that persist after the agent reached them, are blacklisted for the episode (a frontier within
-`keep_radius_m` of a blacklisted point is skipped). Ties in value go to the nearest frontier, so a constant
+steps, or that persist after the agent reached them, are blacklisted (a frontier within `keep_radius_m` of a
+blacklisted point is skipped); when every frontier is blacklisted the list is cleared and they are tried
+again (the map has grown since: a frontier blocked by a bump may be reachable now), so the agent STOPs for
+want of frontiers only when there are none. Ties in value go to the nearest frontier, so a constant
 scorer gives nearest-frontier exploration. When every candidate was abandoned from this spot the nearest
 one is taken (VLFM's code takes the farthest, against its own comment).
 """
@@ -30,6 +32,7 @@ class FrontierChooser:
         self.blacklist: list[tuple[int, int]] = []
         self.abandoned: set[tuple[int, int, int, int]] = set()  # (agent row, col, frontier row, col)
         self.choices = 0  # new choices so far (a kept frontier whose waypoint moved is the same choice)
+        self.cleared = 0  # times the blacklist was emptied because it held every frontier
 
     def _near(self, rows: np.ndarray, cols: np.ndarray, points: list[tuple[int, int]]) -> np.ndarray:
         if not points:
@@ -46,11 +49,15 @@ class FrontierChooser:
 
     def choose(self, rows: np.ndarray, cols: np.ndarray, values: np.ndarray, agent: tuple[int, int]) -> int | None:
         """Index of the frontier to pursue among (rows, cols) with `values`, or None when none is left."""
-        ok = ~self._near(rows, cols, self.blacklist)
-        idx = np.flatnonzero(ok)
-        if idx.size == 0:
+        if rows.shape[0] == 0:
             self.drop_target(blacklist=False)
             return None
+        ok = ~self._near(rows, cols, self.blacklist)
+        if not ok.any():
+            self.blacklist.clear()
+            self.cleared += 1
+            ok[:] = True
+        idx = np.flatnonzero(ok)
         dist = np.hypot(rows[idx] - agent[0], cols[idx] - agent[1])
         order = idx[np.lexsort((dist, -values[idx]))]  # best value first, nearest on ties
         best = int(order[0])

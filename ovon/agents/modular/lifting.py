@@ -14,8 +14,6 @@ from ovon.agents.modular.config import LiftConfig
 from ovon.agents.modular.sensors import DepthProjector, Pose2D
 from ovon.models.detectors.base import Detection
 
-MAX_POINTS_PER_DETECTION = 256  # evenly spaced subset: the nearest point barely moves, the cost is bounded
-
 
 class GoalMemory:
     def __init__(self, cfg: LiftConfig, projector: DepthProjector) -> None:
@@ -37,8 +35,9 @@ class GoalMemory:
         cam = self.projector.camera
         pix &= (depth < cam.max_depth * self.cfg.max_range_fraction) & (depth >= self.cfg.min_range_m)
         rr, cc = np.nonzero(pix)
-        if rr.size > MAX_POINTS_PER_DETECTION:
-            idx = np.linspace(0, rr.size - 1, MAX_POINTS_PER_DETECTION).astype(np.int64)
+        k = self.cfg.points_per_detection
+        if rr.size > k:  # an evenly spaced subset: the nearest point barely moves, the cost is bounded
+            idx = np.linspace(0, rr.size - 1, k).astype(np.int64)
             rr, cc = rr[idx], cc[idx]
         return rr, cc
 

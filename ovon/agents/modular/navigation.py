@@ -132,13 +132,13 @@ class GeometricNavigator:
         return rr[pick].astype(np.int32), cc[pick].astype(np.int32)
 
     def _start_cell(self, pose: Pose2D) -> tuple[int, int, bool]:
-        """The agent cell, or the nearest navigable cell within 0.5 m when the map blocks the agent's own
-        cell; the flag says whether the agent stands on a navigable cell."""
+        """The agent cell, or the nearest navigable cell within `escape_radius_m` when the map blocks the
+        agent's own cell; the flag says whether the agent stands on a navigable cell."""
         m = self.maps
         r, c = m.cell(pose.x, pose.z)
-        if m.navigable[r, c]:
+        if not m.in_bounds(r, c) or m.navigable[r, c]:
             return r, c, True
-        k = max(1, int(round(0.5 / m.cell_size)))
+        k = max(1, int(round(self.cfg.escape_radius_m / m.cell_size)))
         r0, c0 = max(0, r - k), max(0, c - k)
         rr, cc = np.nonzero(m.navigable[r0 : r + k + 1, c0 : c + k + 1])
         if rr.size == 0:

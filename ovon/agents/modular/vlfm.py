@@ -13,6 +13,7 @@ siglip` (the `paper` preset) the agent uses RGB, depth and odometry only. Its ro
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 from ovon.agents.modular.config import VLFMConfig, modular_config
@@ -21,8 +22,6 @@ from ovon.agents.modular.frontier_choice import FrontierChooser
 from ovon.agents.modular.value_map import ValueMap
 from ovon.models.scorers import describe_scorer, make_scorer
 from ovon.sim.agent import STOP, TURN_LEFT
-
-MAX_CHOICES_PER_STEP = 8  # frontiers tried in one step when the chosen ones turn out unreachable
 
 
 def describe_vlfm(cfg: VLFMConfig) -> str:
@@ -48,6 +47,7 @@ class VLFMAgent:
         self.chooser: FrontierChooser | None = None
         self.mode = "idle"
         self.step = 0
+        self.timing: dict[str, float] = {}  # ms of the last step per phase (benchmarks/vlfm_step.py)
 
     @staticmethod
     def describe(**kwargs: Any) -> str:
@@ -74,15 +74,27 @@ class VLFMAgent:
         self._progress_age = 0
 
     def act(self, observation: dict) -> int:
+        t0 = time.perf_counter()
+        action = self._act(observation)
+        t3 = time.perf_counter()
+        self.timing["total"] = (t3 - t0) * 1e3
+        self.timing["decide"] = self.timing["total"] - sum(self.timing.get(k, 0.0) for k in ("maps", "detect", "value"))
+        return action
+
+    def _act(self, observation: dict) -> int:
         core = self.core
         if core.maps is None:
             self.reset({})
+        self.timing = {}
         if not core.observe(observation):
             self.mode = "off_map"
             return core.record(STOP)
+        self.timing.update(core.timing)
         assert self.value_map is not None
+        t = time.perf_counter()
         score = self.scorer.score(observation, str(observation["goal"]))
         self.value_map.update(score, core.pose)
+        self.timing["value"] = (time.perf_counter() - t) * 1e3
         self.step += 1
         if self.step <= self.cfg.spin_steps:
             self.mode = "spin"
@@ -112,7 +124,7 @@ class VLFMAgent:
         assert maps is not None and vm is not None and chooser is not None
         pose = core.pose
         agent = maps.cell(pose.x, pose.z)
-        for _ in range(MAX_CHOICES_PER_STEP):
+        for _ in range(self.cfg.max_choices_per_step):
             fr = maps.frontiers()
             if len(fr) == 0:
                 self.mode = "no_frontier"
