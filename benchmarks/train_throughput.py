@@ -2,6 +2,12 @@
 
 Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,dagger,ppo] [--updates 4]
        [--workers 2] [--houses 0,1] [--text hash|real] [--out benchmarks/results/train_throughput.json]
+       [--baseline-rev REV --repeats 2]
+
+With `--baseline-rev REV` (e.g. the tag `baseline-old-stack`, the code before the env-stack rewrite) the
+same benchmark runs alternately in this tree and in a temporary git worktree of REV, each in a fresh
+process, `--repeats` times; the JSON then holds both medians, their ratio and the CPU seconds (process
+tree) per env step of each. Compare ratios from one run: the machine is shared and noisy.
 
 Each online algorithm (DAgger with the configured expert, PPO) runs `--updates` updates of the preset on
 ad-hoc episodes in procedural houses, envs in `--workers` processes; the first update (world loading,
@@ -30,9 +36,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ovon.train.common import adhoc_specs, needed_texts, parse_seed_list, write_text_table  # noqa: E402
 from ovon.train.config import train_preset  # noqa: E402
+from ovon.train.episodes import adhoc_specs, parse_seed_list  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
+from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 
 
 def _stats(rows: list[dict], key: str) -> float | None:
@@ -66,7 +73,7 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
 def bench_bc(cfg, specs, root: Path, episodes: int) -> dict:
     from ovon.train import train
     from ovon.train.bc import record_shards
-    from ovon.train.common import text_table
+    from ovon.train.text import text_table
 
     shards = root / "bc_shards"
     table = text_table(cfg.encoder, needed_texts(specs), cfg.text_cache, write=False)
@@ -83,6 +90,56 @@ def bench_bc(cfg, specs, root: Path, episodes: int) -> dict:
             "context": cfg.policy.context}
 
 
+def compare(args) -> None:
+    """Run this script alternately here and in a worktree of `args.baseline_rev`; write medians + ratios."""
+    import resource
+    import subprocess
+
+    here = Path(__file__).resolve().parents[1]
+    tmp = Path(tempfile.mkdtemp(prefix="ovon-bench-rev-"))
+    base = tmp / "baseline"
+    subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach", str(base), args.baseline_rev],
+                   check=True, capture_output=True)
+    passthrough = ["--preset", args.preset, "--algos", args.algos, "--updates", str(args.updates),
+                   "--workers", str(args.workers), "--houses", args.houses, "--expert", args.expert,
+                   "--text", args.text, "--bc-episodes", str(args.bc_episodes)]
+    if args.envs:
+        passthrough += ["--envs", str(args.envs)]
+    runs: dict[str, list[dict]] = {"current": [], "baseline": []}
+    try:
+        for rep in range(args.repeats):
+            for name, root in (("baseline", base), ("current", here)):
+                out = tmp / f"{name}{rep}.json"
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                subprocess.run([sys.executable, str(root / "benchmarks" / "train_throughput.py"), *passthrough,
+                                "--out", str(out)], cwd=root, check=True, env={**os.environ, "PYTHONPATH": str(root)})
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                r = json.loads(out.read_text())
+                r["cpu_s"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+                runs[name].append(r)
+                print(name, rep, {a: round(v.get("env_steps_per_s") or 0, 1) for a, v in r["algos"].items()},
+                      flush=True)
+    finally:
+        subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(base)], capture_output=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+    summary: dict = {"baseline_rev": args.baseline_rev, "repeats": args.repeats, "preset": args.preset,
+                     "houses": args.houses, "updates": args.updates, "load_average": os.getloadavg(),
+                     "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {},
+                     "runs": runs}
+    for algo in [a for a in args.algos.split(",") if a and a != "bc"]:
+        med = {n: float(np.median([r["algos"][algo]["env_steps_per_s"] for r in rs])) for n, rs in runs.items()}
+        rollout = {n: float(np.median([r["algos"][algo]["rollout_steps_per_s"] for r in rs])) for n, rs in runs.items()}
+        summary["algos"][algo] = {"env_steps_per_s": med, "rollout_steps_per_s": rollout,
+                                  "ratio": med["current"] / med["baseline"],
+                                  "rollout_ratio": rollout["current"] / rollout["baseline"]}
+        entry = summary["algos"][algo]
+        print(f"{algo}: {med['baseline']:.0f} -> {med['current']:.0f} env steps/s including learning "
+              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(summary, indent=1))
+    print(f"wrote {args.out}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", default="cpu-small")
@@ -95,7 +152,12 @@ def main() -> None:
     ap.add_argument("--text", default="hash", choices=["hash", "real"])
     ap.add_argument("--bc-episodes", type=int, default=8)
     ap.add_argument("--out", default="benchmarks/results/train_throughput.json")
+    ap.add_argument("--baseline-rev", help="git revision to compare against (alternating runs, fresh processes)")
+    ap.add_argument("--repeats", type=int, default=2)
     args = ap.parse_args()
+    if args.baseline_rev:
+        compare(args)
+        return
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     root = Path(tempfile.mkdtemp(prefix="ovon-train-bench-"))

@@ -28,8 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ovon.agents import make_agent  # noqa: E402
 from ovon.config.sim import cpu_sim_config  # noqa: E402
+from ovon.env.core import ObjectNavEnv  # noqa: E402
 from ovon.scenes.procedural import generate_house  # noqa: E402
-from ovon.sim.env import ObjectNavEnv  # noqa: E402
 from ovon.task.episode import EpisodeSpec  # noqa: E402
 
 PHASES = ("maps", "detect", "value", "decide")
@@ -42,7 +42,7 @@ def run(env, agent, spec: EpisodeSpec, seed: int, max_steps: int) -> tuple[list[
     rows = []
     info: dict = {}
     for _ in range(max_steps):
-        if agent.privileged:
+        if agent.privileged:  # the harness's privileged channel (ovon.env.PrivilegedInfo does the same)
             obs = {**obs, "privileged": env.privileged()}
         c, t = time.thread_time(), time.perf_counter()
         action = agent.act(obs)

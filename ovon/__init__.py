@@ -4,11 +4,13 @@ __version__ = "0.1.0"
 
 
 def _register_envs() -> None:
+    """`gymnasium.make("ovon/ObjectNav-v0", ...)`; the entry point is imported only when made."""
     try:
-        from ovon.sim.registration import register_envs
-    except ImportError:  # pragma: no cover - only while the simulator is absent
+        import gymnasium as gym
+    except ImportError:  # pragma: no cover
         return
-    register_envs()
+    if "ovon/ObjectNav-v0" not in gym.registry:
+        gym.register(id="ovon/ObjectNav-v0", entry_point="ovon.env:make_objectnav")
 
 
 _register_envs()

@@ -128,3 +128,44 @@ def grid_house(seed: int = 0, rooms: int = 4, room_size: float = 5.0, furniture:
         h = rng.uniform(0.3, 1.2)
         boxes.append(((cx - w / 2, 0.0, cz - d / 2), (cx + w / 2, h, cz + d / 2)))
     return boxes
+
+
+# ------------------------------------------------------------------------------- mesh files on disk
+
+
+def to_z_up(mesh: Mesh) -> Mesh:
+    """The same mesh in a z-up frame (what habitat's `up: [0, 0, 1]` assets use): (x, y, z) -> (x, -z, y)."""
+    v = mesh.vertices.astype(np.float64)
+    return Mesh(vertices=np.stack([v[:, 0], -v[:, 2], v[:, 1]], axis=1).astype(np.float32), faces=mesh.faces.copy())
+
+
+def write_glb(mesh: Mesh, path) -> None:  # noqa: ANN001
+    from ovon.scenes.hm3dsem import encode_glb
+
+    path.write_bytes(encode_glb(mesh.vertices, mesh.faces, vertex_rgb=mesh.vertex_colors))
+
+
+def write_gltf_bin(mesh: Mesh, path) -> None:  # noqa: ANN001
+    """`<name>.gltf` (JSON) + `<name>.bin` (the buffer as an external file)."""
+    import json
+    import struct
+
+    from ovon.scenes.hm3dsem import encode_glb
+
+    glb = encode_glb(mesh.vertices, mesh.faces)
+    jlen = struct.unpack_from("<I", glb, 12)[0]
+    doc = json.loads(glb[20 : 20 + jlen])
+    blen = struct.unpack_from("<I", glb, 20 + jlen)[0]
+    binary = glb[28 + jlen : 28 + jlen + blen]
+    doc["buffers"][0]["uri"] = path.with_suffix(".bin").name
+    path.write_text(json.dumps(doc))
+    path.with_suffix(".bin").write_bytes(binary)
+
+
+def write_trimesh(mesh: Mesh, path) -> None:  # noqa: ANN001
+    """PLY or OBJ (by suffix) through trimesh, with vertex colours when the mesh has them."""
+    import trimesh
+
+    tm = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False,
+                         vertex_colors=mesh.vertex_colors)
+    tm.export(path)

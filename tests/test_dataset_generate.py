@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ovon.dataset.generate import VAL_SPLITS, generate, largest_remainder
@@ -106,3 +107,43 @@ def test_unknown_split_and_missing_scenes_are_clear_errors(tmp_path):
         generate(tmp_path, tmp_path / "o", tiny_generation_config(), splits=("val_nope",))
     with pytest.raises(FileNotFoundError, match="no scenes under"):
         generate(tmp_path, tmp_path / "o", tiny_generation_config(), splits=("val_seen",))
+
+
+def test_shortest_path_oracle_finishes_every_generated_episode(tiny_dataset, tiny_scenes):
+    """Issue 11: no generated episode the shortest-path oracle cannot finish (the generator runs the
+    oracle on the grid for every start; here the check is repeated from the files as written)."""
+    from ovon.config.task import TaskConfig
+    from ovon.dataset.starts import oracle_finishes
+    from ovon.geometry import quat_to_yaw
+    from ovon.sim.geodesic import distance_field
+    from ovon.sim.navgrid import build_navigation
+    from ovon.sim.world import load_scene_any
+
+    task = TaskConfig()
+    n = ok = 0
+    for split in VAL_SPLITS:
+        ds = EpisodeDataset(tiny_dataset, split)
+        for scene in ds.scenes():
+            shard = ds.load_scene(scene)
+            folder = next(p for p in tiny_scenes.glob("val/*") if p.name.endswith(scene))
+            nav = build_navigation(load_scene_any(str(folder)))
+            for ep in shard.episodes:
+                grid = nav.grid_for(ep.start_position)
+                vps = [(np.asarray(v.position), quat_to_yaw(v.rotation)) for g in goals_for(ep, shard.goals_by_category)
+                       for v in g.view_points]
+                fld = distance_field(grid, np.array([p for p, _ in vps]))
+                n += 1
+                ok += oracle_finishes(grid, ep.start_position, quat_to_yaw(ep.start_rotation), vps, fld,
+                                      task.max_steps, task.success_distance)
+    assert n > 20 and ok == n, f"oracle finished {ok} of {n}"
+
+
+def test_stats_of_an_empty_split_print_no_nan(tmp_path):
+    from ovon.dataset.io import write_scene_shard, write_split_shell
+    from ovon.dataset.stats import format_stats
+
+    write_split_shell(tmp_path, "val_seen")
+    write_scene_shard(tmp_path, "val_seen", "Empty", [], {})
+    stats = dataset_stats(tmp_path)
+    assert stats["splits"]["val_seen"]["episodes"] == 0
+    assert "nan" not in format_stats(stats).lower() and "nan" not in json.dumps(stats).lower()

@@ -1,5 +1,6 @@
-"""The Gymnasium environment: registration, the env checker, observations, episode end, odometry,
-noise vs ground truth, random and given starts (hand-built room of test_env_scene; one procedural house)."""
+"""The Gymnasium environment: registration, the env checker, observations, the privileged channel,
+episode end, odometry, noise vs ground truth, random and given starts, the vector env (hand-built room of
+test_env_scene; one procedural house)."""
 
 from __future__ import annotations
 
@@ -14,8 +15,8 @@ from gymnasium.utils.env_checker import check_env
 import ovon  # noqa: F401  (registers the env)
 from ovon.config.sim import NoiseConfig
 from ovon.config.task import TaskConfig
+from ovon.env import ObjectNavEnv, make_objectnav
 from ovon.sim.agent import LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
-from ovon.sim.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
 from tests.test_env_scene import objects_scene, small_sim
 
@@ -23,8 +24,13 @@ SCENE = objects_scene()
 
 
 def make(**kw) -> ObjectNavEnv:
+    """The env; with privileged=True wrapped so that info["privileged"] holds the ground truth."""
     kw.setdefault("sim", small_sim())
-    return ObjectNavEnv(scene=SCENE, goal=kw.pop("goal", "couch"), **kw)
+    return make_objectnav(scene=SCENE, goal=kw.pop("goal", "couch"), **kw)
+
+
+def truth(info: dict):
+    return info["privileged"]
 
 
 def given(start=(3.0, 0.0, 2.0), yaw_deg=0.0, **kw) -> dict:
@@ -44,37 +50,60 @@ def test_gym_make_registered():
 
 
 def test_check_env():
-    env = make(privileged=True)
-    check_env(env)
-    env.close()
+    for privileged in (False, True):
+        env = make(privileged=privileged)
+        check_env(env.unwrapped)
+        env.close()
 
 
-def test_observations_and_privileged_semantic():
+def test_observations_hold_no_ground_truth():
+    """A plain env's observation and info carry nothing an agent could cheat with; the wrapper adds
+    the one privileged channel."""
     env = make()
     obs, info = env.reset(seed=1)
     assert set(obs) == {"rgb", "depth", "odometry", "goal", "collided"}
+    assert set(info) == {"episode_id"}
     assert obs["collided"] == 0
     assert obs["rgb"].shape == (48, 64, 3) and obs["rgb"].dtype == np.uint8
     assert obs["depth"].shape == (48, 64) and obs["depth"].dtype == np.float32
     assert obs["odometry"].dtype == np.float32
+    for a in (MOVE_FORWARD, TURN_LEFT, STOP):
+        obs, _, term, _, info = env.step(a)
+        assert set(obs) == {"rgb", "depth", "odometry", "goal", "collided"}
+        assert set(info) <= {"episode_id", "metrics"} and ("metrics" in info) == term
     env.close()
     env = make(privileged=True)
-    obs, _ = env.reset(seed=1)
-    assert obs["semantic"].shape == (48, 64) and obs["semantic"].dtype == np.int32
+    obs, info = env.reset(seed=1)
+    assert set(obs) == {"rgb", "depth", "odometry", "goal", "collided"}
+    p = truth(info)
+    assert p.frame.semantic.shape == (48, 64) and p.frame.semantic.dtype == np.int32
+    assert p.state.position.shape == (3,) and math.isfinite(p.distance_to_goal)
+    assert p.sim.camera.width == 64 and p.task.success_distance == 0.25
     assert env.observation_space.contains(obs)
     env.close()
 
 
-def test_info_has_true_pose_and_reset_is_deterministic():
-    env = make()
-    _, a = env.reset(seed=7)
-    _, b = env.reset(seed=7)
-    _, c = env.reset(seed=8)
-    for info in (a, b):
-        assert info["position"].shape == (3,) and "yaw" in info and "pitch" in info
-    np.testing.assert_array_equal(a["position"], b["position"])
-    assert a["yaw"] == b["yaw"]
-    assert not np.array_equal(a["position"], c["position"])
+def test_rgb_can_be_skipped():
+    sim = small_sim()
+    env = make(sim=dataclasses.replace(sim, camera=dataclasses.replace(sim.camera, rgb=False)), privileged=True)
+    obs, info = env.reset(seed=1)
+    assert "rgb" not in obs and "rgb" not in env.observation_space.spaces
+    ref = make(privileged=True)
+    _, ref_info = ref.reset(seed=1)
+    np.testing.assert_array_equal(truth(info).frame.semantic, truth(ref_info).frame.semantic)
+    np.testing.assert_array_equal(truth(info).frame.depth, truth(ref_info).frame.depth)
+    env.close()
+    ref.close()
+
+
+def test_reset_is_deterministic():
+    env = make(privileged=True)
+    a = truth(env.reset(seed=7)[1]).state
+    b = truth(env.reset(seed=7)[1]).state
+    c = truth(env.reset(seed=8)[1]).state
+    np.testing.assert_array_equal(a.position, b.position)
+    assert a.yaw == b.yaw
+    assert not np.array_equal(a.position, c.position)
     env.close()
 
 
@@ -101,7 +130,7 @@ def test_max_steps_truncates():
 
 
 def test_odometry_starts_at_zero_and_tracks_motion():
-    env = make()
+    env = make(privileged=True)
     obs, _ = env.reset(options=given((3.0, 0.0, 3.0), yaw_deg=90.0))  # facing -x
     np.testing.assert_array_equal(obs["odometry"], np.zeros(3, np.float32))
     obs, *_ = env.step(MOVE_FORWARD)
@@ -113,14 +142,14 @@ def test_odometry_starts_at_zero_and_tracks_motion():
     np.testing.assert_allclose(obs["odometry"][:2], [0.25 + 0.25 * math.cos(math.radians(30)),
                                                      0.25 * math.sin(math.radians(30))], atol=1e-5)
     # start frame: forward = -x, left = +z (yaw 90 deg looks along -x)
-    np.testing.assert_allclose(info["position"][[0, 2]], [3.0 - obs["odometry"][0], 3.0 + obs["odometry"][1]],
-                               atol=1e-5)
+    np.testing.assert_allclose(truth(info).state.position[[0, 2]],
+                               [3.0 - obs["odometry"][0], 3.0 + obs["odometry"][1]], atol=1e-5)
     obs, *_ = env.step(LOOK_UP)
     np.testing.assert_allclose(obs["odometry"][2], math.radians(30), atol=1e-5)
     env.close()
 
 
-def _walk(env: ObjectNavEnv, actions: list[int]) -> tuple[list[dict], list[np.ndarray]]:
+def _walk(env, actions: list[int]) -> tuple[list[dict], list[np.ndarray]]:
     infos, odos = [], []
     for a in actions:
         obs, _, _, _, info = env.step(a)
@@ -131,37 +160,38 @@ def _walk(env: ObjectNavEnv, actions: list[int]) -> tuple[list[dict], list[np.nd
 
 def test_actuation_noise_moves_true_pose_and_metrics_follow_it():
     actions = [MOVE_FORWARD, MOVE_FORWARD, TURN_RIGHT, MOVE_FORWARD, STOP]
-    clean = make()
+    clean = make(privileged=True)
     clean.reset(seed=0, options=given((3.0, 0.0, 3.0)))
     ci, _ = _walk(clean, actions)
     sim = small_sim()
-    noisy = make(sim=dataclasses.replace(sim, noise=NoiseConfig(actuation="ilqr")))
+    noisy = make(sim=dataclasses.replace(sim, noise=NoiseConfig(actuation="ilqr")), privileged=True)
     _, i0 = noisy.reset(seed=0, options=given((3.0, 0.0, 3.0)))
     ni, _ = _walk(noisy, actions)
-    assert not np.allclose(ci[-1]["position"], ni[-1]["position"])
-    # metrics are computed from the true (noisy) pose: path length and distance match info
-    path = [i0["position"]] + [i["position"] for i in ni]
+    assert not np.allclose(truth(ci[-1]).state.position, truth(ni[-1]).state.position)
+    # metrics are computed from the true (noisy) pose: path length and distance match the ground truth
+    path = [truth(i0).state.position] + [truth(i).state.position for i in ni]
     length = sum(float(np.linalg.norm(b - a)) for a, b in zip(path[:-1], path[1:], strict=True))
     m = ni[-1]["metrics"]
+    last = truth(ni[-1])
     assert m["path_length"] == pytest.approx(length)
-    assert m["distance_to_goal"] == pytest.approx(noisy.privileged().goal_field.distance(ni[-1]["position"]))
-    assert m["distance_to_goal"] == pytest.approx(ni[-1]["distance_to_goal"])
+    assert m["distance_to_goal"] == pytest.approx(last.goal_field.distance(last.state.position))
+    assert m["distance_to_goal"] == pytest.approx(last.distance_to_goal)
     clean.close()
     noisy.close()
 
 
 def test_odometry_noise_leaves_true_pose_alone():
     actions = [MOVE_FORWARD, TURN_LEFT, MOVE_FORWARD, MOVE_FORWARD]
-    clean = make()
+    clean = make(privileged=True)
     clean.reset(seed=0, options=given((3.0, 0.0, 3.0)))
     ci, co = _walk(clean, actions)
     sim = small_sim()
-    noisy = make(sim=dataclasses.replace(sim, noise=NoiseConfig(odometry=True)))
+    noisy = make(sim=dataclasses.replace(sim, noise=NoiseConfig(odometry=True)), privileged=True)
     noisy.reset(seed=0, options=given((3.0, 0.0, 3.0)))
     ni, no = _walk(noisy, actions)
     for a, b in zip(ci, ni, strict=True):
-        np.testing.assert_array_equal(a["position"], b["position"])
-        assert a["distance_to_goal"] == b["distance_to_goal"]
+        np.testing.assert_array_equal(truth(a).state.position, truth(b).state.position)
+        assert truth(a).distance_to_goal == truth(b).distance_to_goal
     err = np.abs(no[-1] - co[-1])
     assert err.max() > 0
     assert np.all(err[:2] <= 4 * 0.007 + 1e-6) and err[2] <= 4 * math.radians(2.0) + 1e-6
@@ -170,25 +200,26 @@ def test_odometry_noise_leaves_true_pose_alone():
 
 
 def test_random_start_is_navigable_and_connected():
-    env = make()
+    env = make(privileged=True)
     for seed in range(10):
         _, info = env.reset(seed=seed)
-        priv = env.privileged()
-        assert priv.grid.is_navigable(info["position"])
-        assert math.isfinite(info["distance_to_goal"]) and info["distance_to_goal"] > 0.25
-        assert -math.pi <= info["yaw"] <= math.pi
+        p = truth(info)
+        assert p.grid.is_navigable(p.state.position)
+        assert math.isfinite(p.distance_to_goal) and p.distance_to_goal > 0.25
+        assert -math.pi <= p.state.yaw <= math.pi
     env.close()
 
 
 def test_reset_with_episode_start_and_viewpoints():
-    env = make()
+    env = make(privileged=True)
     vp = GoalViewpoint(np.array([1.0, 0.0, 1.5]), 0.0)
     obs, info = env.reset(options=given((5.0, 0.0, 3.0), yaw_deg=45.0, viewpoints=[vp]))
-    np.testing.assert_allclose(info["position"], [5.0, 0.0, 3.0])
-    assert info["yaw"] == pytest.approx(math.radians(45.0))
+    p = truth(info)
+    np.testing.assert_allclose(p.state.position, [5.0, 0.0, 3.0])
+    assert p.state.yaw == pytest.approx(math.radians(45.0))
     # geodesic = straight line in the empty middle of the room
-    assert info["distance_to_goal"] == pytest.approx(math.hypot(4.0, 1.5), abs=0.1)
-    assert env.privileged().viewpoints == [vp]
+    assert p.distance_to_goal == pytest.approx(math.hypot(4.0, 1.5), abs=0.1)
+    assert p.viewpoints == [vp]
     env.close()
 
 
@@ -204,38 +235,56 @@ def test_procedural_house_smoke():
     from ovon.scenes.procedural import generate_house
 
     cat = generate_house(0).categories[0]
-    env = gym.make("ovon/ObjectNav-v0", scene="procedural:0", goal=cat, sim=cpu_sim_config())
+    env = gym.make("ovon/ObjectNav-v0", scene="procedural:0", goal=cat, sim=cpu_sim_config(), privileged=True)
     obs, info = env.reset(seed=0)
-    assert obs["rgb"].shape == (120, 160, 3) and math.isfinite(info["distance_to_goal"])
+    assert obs["rgb"].shape == (120, 160, 3) and math.isfinite(truth(info).distance_to_goal)
     for a in (MOVE_FORWARD, TURN_LEFT, MOVE_FORWARD):
         obs, *_ = env.step(a)
     assert obs["rgb"].std() > 0
     env.close()
 
 
-@pytest.mark.parametrize("shared_memory", [True, False])
-def test_vector_env_two_workers(shared_memory):
-    from ovon.sim.vector import make_vector_env
+def _vector_trace(workers: int) -> np.ndarray:
+    import functools
 
-    kw = [dict(scene=SCENE, goal="couch", sim=small_sim(), task=TaskConfig(max_steps=3)),
-          dict(scene=SCENE, goal="toaster", sim=small_sim(), task=TaskConfig(max_steps=3))]
-    vec = make_vector_env(2, kw, shared_memory=shared_memory)
+    from ovon.env.stack import EnvRecipe, build_env
+    from ovon.env.vector import ObjectNavVectorEnv
+
+    recipes = [EnvRecipe(sim=small_sim(), task=TaskConfig(max_steps=3), scene=SCENE, goal=g, privileged=True)
+               for g in ("couch", "toaster", "couch")]
+    vec = ObjectNavVectorEnv([functools.partial(build_env, r) for r in recipes], workers=workers)
     try:
         obs, info = vec.reset(seed=0)
-        assert obs["goal"] == ("couch", "toaster")
-        assert obs["rgb"].shape == (2, 48, 64, 3) and obs["depth"].shape == (2, 48, 64)
+        assert obs["goal"] == ("couch", "toaster", "couch")
+        assert obs["rgb"].shape == (3, 48, 64, 3) and obs["depth"].shape == (3, 48, 64)
         assert vec.observation_space.contains(obs)
-        pos0 = info["position"].copy()
-        ends = 0
-        for _ in range(4):
-            obs, reward, term, trunc, info = vec.step(np.array([MOVE_FORWARD, TURN_LEFT]))
-            assert obs["goal"] == ("couch", "toaster") and reward.shape == (2,)
-            ends += int(trunc.sum())
-        assert ends == 2  # both truncated at step 3; step 4 was the auto-reset (NextStep mode)
+        assert "privileged" not in info
+        first = obs["depth"].copy()
+        trace = [first]
+        for t in range(4):
+            obs, reward, term, trunc, info = vec.step(np.array([MOVE_FORWARD, TURN_LEFT, TURN_RIGHT]))
+            assert obs["goal"] == ("couch", "toaster", "couch") and reward.shape == (3,)
+            assert "privileged" not in info and "privileged" not in info.get("final_info", {})
+            trace.append(obs["depth"].copy())
+            if t == 2:  # all truncated at step 3, and the same step already returns the next episode
+                assert trunc.all() and info["_final_info"].all()
+                assert info["final_info"]["metrics"]["steps"].tolist() == [3, 3, 3]
+            else:
+                assert "final_info" not in info
         obs, info = vec.reset(seed=0)
-        np.testing.assert_array_equal(info["position"], pos0)  # seeded resets repeat
+        np.testing.assert_array_equal(obs["depth"], first)  # seeded resets repeat
+        assert vec.call("render")[0].shape == (48, 64, 3)
     finally:
         vec.close()
+    return np.stack(trace)
+
+
+def test_vector_env_hosts_several_envs_per_worker():
+    """Same-step autoreset, text goals, final_info with metrics, no ground truth crossing processes,
+    and the same observations whether the envs run in this process or on 1 or 2 workers."""
+    ref = _vector_trace(0)
+    for workers in (1, 2):
+        np.testing.assert_array_equal(_vector_trace(workers), ref)
 
 
 def test_cli_sim_view_and_bench(tmp_path, capsys):
@@ -251,22 +300,26 @@ def test_cli_sim_view_and_bench(tmp_path, capsys):
                  "--height", "30", "--hfov", "90", "--backend", "embree", "--out", str(out2)]) == 0
     assert main(["sim", "view", "procedural:0", "--pose", "1,2", "--out", str(out2)]) == 2
     capsys.readouterr()
-    assert main(["sim", "bench", "--width", "40", "--height", "30", "--steps", "30"]) == 0
-    last = capsys.readouterr().out.strip().splitlines()[-1]
-    value, unit = last.split(" ", 1)
-    assert unit == "steps/s" and float(value) > 0
+    for workers in ("0", "1"):
+        assert main(["sim", "bench", "--width", "40", "--height", "30", "--steps", "30", "--workers", workers,
+                     "--envs-per-worker", "2", "--no-rgb"]) == 0
+        last = capsys.readouterr().out.strip().splitlines()[-1]
+        value, unit = last.split(" ", 1)
+        assert unit == "steps/s" and float(value) > 0
+    assert main(["sim", "bench", "--workers", "-1"]) == 2
 
 
 def test_collision_flag_in_the_observation():
     """Walking straight into the room's wall: the flag is 0 while free, 1 once MOVE_FORWARD is blocked,
-    and it agrees with info["collided"]."""
+    and it agrees with the tracker's collision count."""
     env = make()
     obs, _ = env.reset(options=given())
     flags, infos = [], []
     for _ in range(40):
+        before = env.unwrapped.tracker.collisions
         obs, _, term, trunc, info = env.step(MOVE_FORWARD)
         flags.append(obs["collided"])
-        infos.append(info["collided"])
+        infos.append(env.unwrapped.tracker.collisions > before)
         assert env.observation_space.contains(obs)
         if term or trunc:
             break

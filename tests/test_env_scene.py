@@ -15,9 +15,9 @@ import pytest
 
 from ovon.config.sim import AgentConfig, CameraConfig, SimConfig
 from ovon.config.task import TaskConfig
+from ovon.env import ObjectNavEnv
 from ovon.scenes.model import Mesh, ObjectInstance, Scene
 from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
-from ovon.sim.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec
 from tests.meshes import box, room_boxes
 
@@ -72,8 +72,7 @@ def small_sim(backend: str = "auto") -> SimConfig:
 
 @pytest.fixture(scope="module")
 def env():
-    e = ObjectNavEnv(scene=objects_scene(), goal="couch", sim=small_sim(), task=TaskConfig(max_steps=40),
-                     privileged=True)
+    e = ObjectNavEnv(scene=objects_scene(), goal="couch", sim=small_sim(), task=TaskConfig(max_steps=40))
     yield e
     e.close()
 

@@ -204,8 +204,11 @@ def test_missing_files(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"FixtureScn01\.semantic\.glb"):
         load_scene(folder)
     (folder / "FixtureScn01.semantic.txt").unlink()
-    with pytest.raises(FileNotFoundError, match=r"FixtureScn01\.semantic\.txt"):
-        load_scene(folder)
+    # both annotation files gone: a bare mesh, which loads without objects (issue 11: any mesh)
+    bare = load_scene(folder)
+    assert not bare.objects and "FixtureScn01.semantic.txt" in bare.semantics_missing
+    with pytest.raises(ValueError, match="ObjectNav goals need semantic annotations"):
+        bare.require_semantics()
     (folder / "FixtureScn01.glb").unlink()
     with pytest.raises(FileNotFoundError, match="expected <id>.glb"):
         load_scene(folder)

@@ -19,16 +19,16 @@ from ovon.agents.modular.navigation import GeometricNavigator, NavRequest
 from ovon.agents.modular.sensors import Pose2D, Sensors
 from ovon.agents.modular.value_map import ValueMap
 from ovon.config.base import ConfigError
+from ovon.env import make_objectnav
 from ovon.evaluate.runner import run_episode
 from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT
-from ovon.sim.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec
 from tests.modular_scene import START, portrait_sim, two_room_scene
 
 
 @pytest.fixture(scope="module")
 def env():
-    e = ObjectNavEnv(scene=two_room_scene(), goal="couch", sim=portrait_sim())
+    e = make_objectnav(scene=two_room_scene(), goal="couch", sim=portrait_sim(), privileged=True)
     yield e
     e.close()
 

@@ -14,9 +14,9 @@ import pytest
 from ovon.agents.modular.config import LiftConfig
 from ovon.agents.modular.lifting import GoalMemory
 from ovon.agents.modular.sensors import DepthProjector, pose_from_odometry
+from ovon.env.core import ObjectNavEnv
 from ovon.models.detectors import DetectorConfig, detector_preset, make_detector
 from ovon.models.encoders import FunctionTextEncoder, ModelNotAvailableError
-from ovon.sim.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec
 from tests.modular_scene import OBJECTS, portrait_sim, two_room_scene
 

@@ -12,11 +12,11 @@ from scipy import ndimage
 from ovon.agents.modular.config import MapConfig
 from ovon.agents.modular.maps import AgentMaps
 from ovon.agents.modular.sensors import Sensors, pose_from_odometry
+from ovon.env.core import ObjectNavEnv
 from ovon.experts import FrontierExpert
 from ovon.experts.gridsim import grid_from_arrays, room_grid
 from ovon.maps import ExploredMap, FrontierMap
 from ovon.sim.agent import MOVE_FORWARD, TURN_LEFT, TURN_RIGHT
-from ovon.sim.env import ObjectNavEnv
 from ovon.task.episode import EpisodeSpec
 from tests.modular_scene import START, portrait_sim, two_room_scene
 

@@ -39,7 +39,7 @@ def test_roof_is_not_a_floor_without_hints():
     assert len(nav.floors) == 1 and nav.floors[0].height == pytest.approx(0.0)
 
 
-@pytest.mark.parametrize("width,islands", [(0.30, 2), (0.40, 1), (0.90, 1)])
+@pytest.mark.parametrize("width,islands", [(0.30, 2), (0.40, 2), (0.45, 2), (0.50, 1), (0.90, 1)])
 def test_doorway_width(width, islands):
     boxes = room_boxes(0, 0, 10, 4) + wall_x_with_gap(5.0, 0, 4, 1.5, 1.5 + width)
     g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
@@ -154,3 +154,33 @@ def test_cache_returns_same_object_and_disk_cache(tmp_path, monkeypatch):
     assert c is not b
     assert np.array_equal(c.floors[0].navigable, a.floors[0].navigable)
     assert np.array_equal(c.floors[0].islands, a.floors[0].islands)
+
+
+def test_ten_cm_gap_is_not_a_connection():
+    """A doorway 10 cm wider than the agent (0.44 m): the agent's centre has a 10 cm strip, which a
+    0.25 m / 30 deg agent cannot drive (its heading can be 15 deg off the strip): not connected, and the
+    strip is reported as `narrow`."""
+    from ovon.sim.navgrid import min_drivable_width
+
+    assert min_drivable_width(AgentConfig()) == pytest.approx(2 * 0.25 * np.sin(np.radians(15)))
+    boxes = room_boxes(0, 0, 8, 4) + wall_x_with_gap(4.0, 0, 4, 1.5, 1.5 + 2 * R + 0.10)
+    g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
+    assert g.num_islands == 2 and _island_at(g, 2.0, 2.0) != _island_at(g, 6.0, 2.0)
+    assert g.narrow[g.world_to_cell([4.0, 0.0, 1.5 + R + 0.05])]
+    wide = room_boxes(0, 0, 8, 4) + wall_x_with_gap(4.0, 0, 4, 1.5, 2.2)
+    assert build_navigation(scene_from_boxes(wide, floor_heights=[0.0])).floors[0].num_islands == 1
+
+
+def test_table_top_and_box_interior_are_no_start_islands():
+    boxes = room_boxes(0, 0, 8, 6, wall_height=3.0)
+    boxes += [((1.0, 0.95, 1.0), (3.0, 1.0, 2.5))]  # a table top with head room: an elevated island
+    # a closed box (a cupboard the agent fits in) whose interior is a small island at floor level
+    boxes += [((5.0, 0.0, 1.0), (7.0, 3.0, 1.1)), ((5.0, 0.0, 2.9), (7.0, 3.0, 3.0)),
+              ((5.0, 0.0, 1.1), (5.1, 3.0, 2.9)), ((6.9, 0.0, 1.1), (7.0, 3.0, 2.9))]
+    g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
+    top, inside, main = _island_at(g, 2.0, 1.75), _island_at(g, 6.0, 2.0), _island_at(g, 4.0, 4.5)
+    assert len({top, inside, main}) == 3 and min(top, inside, main) >= 0
+    assert g.elevated()[top] and not g.elevated()[inside] and not g.elevated()[main]
+    assert set(g.start_islands(1.5).tolist()) == {main}
+    rng = np.random.default_rng(0)
+    assert {g.island_of(g.random_point(rng)) for _ in range(300)} <= {main, inside}  # never the table top

@@ -17,9 +17,10 @@ import torch
 torch.set_num_threads(1)
 
 from ovon.train.bc import SHARD_FORMAT  # noqa: E402
-from ovon.train.common import adhoc_specs, needed_texts, write_text_table  # noqa: E402
 from ovon.train.config import TrainConfig, train_preset  # noqa: E402
+from ovon.train.episodes import adhoc_specs  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
+from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 GOALS = ["couch", "bed", "toilet", "sink"]
@@ -160,8 +161,8 @@ def test_bc_overfits_recorded_expert_episodes(tmp_path: Path, house_specs, table
 # ----- DAgger / PPO end to end + the policy agent -----------------------------------------------------
 def test_dagger_then_ppo_finetune_then_agent(tmp_path: Path, house_specs, table_path: str) -> None:
     from ovon.agents import make_agent
+    from ovon.env import make_objectnav
     from ovon.evaluate.runner import run_episode
-    from ovon.sim.env import ObjectNavEnv
     from ovon.train import train
 
     cfg = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table_path)
@@ -184,7 +185,7 @@ def test_dagger_then_ppo_finetune_then_agent(tmp_path: Path, house_specs, table_
 
     agent = make_agent("policy", checkpoint=str(tmp_path / "ft" / "policy.pt"))
     assert agent.privileged
-    env = ObjectNavEnv(episodes=house_specs[:1], sim=cfg.sim, task=cfg.task)
+    env = make_objectnav(episodes=house_specs[:1], sim=cfg.sim, task=cfg.task, privileged=True)
     rec = run_episode(env, agent, house_specs[0], seed=0)
     env.close()
     assert 1 <= rec["steps"] <= cfg.task.max_steps
@@ -200,21 +201,33 @@ def test_ppo_from_scratch_lstm(tmp_path: Path, house_specs, table_path: str) -> 
     assert (tmp_path / "ppo" / "policy.pt").is_file()
 
 
-def test_vec_env_workers_match_in_process(house_specs, table_path: str) -> None:
-    from ovon.train.common import text_table
-    from ovon.train.rollout import make_vec_env
+def test_train_envs_workers_match_in_process(house_specs, table_path: str) -> None:
+    """The training env stack (labels + oracle embeddings + sampler) gives the same batches in this
+    process and on 2 workers; a saved state replays to the same observation."""
+    from ovon.env.stack import EnvRecipe
+    from ovon.train.envs import TrainEnvs
+    from ovon.train.run import expert_config
+    from ovon.train.text import text_table
 
     cfg = train_preset("tiny", algo="dagger", expert="shortest-path", num_envs=2, text_cache=table_path)
     table = text_table(cfg.encoder, needed_texts(house_specs), table_path, write=False)
+    recipe = EnvRecipe(sim=cfg.sim, task=cfg.task, encoder=cfg.encoder,
+                       text_table={k: v.numpy() for k, v in table.items()}, expert=cfg.expert,
+                       expert_cfg=expert_config(cfg), scene_repeat=cfg.scene_repeat)
     runs = []
     for workers in (0, 2):
-        envs = make_vec_env(dataclasses.replace(cfg, env_workers=workers), house_specs, cfg.task, table, True, 0)
+        envs = TrainEnvs(recipe, house_specs, 2, workers, base_seed=0)
         try:
             b = envs.reset()
             seq = [(b.image.clone(), b.label.clone())]
-            for _ in range(5):
+            for t in range(5):
                 b = envs.step(torch.tensor([1, 2]))
                 seq.append((b.image.clone(), b.label.clone()))
+                if t == 2:
+                    state = envs.get_state()
+            replayed = envs.set_state(state)
+            assert torch.equal(replayed.image, seq[3][0]) and torch.equal(replayed.label, seq[3][1])
+            assert not replayed.first.any()
             runs.append(seq)
         finally:
             envs.close()
@@ -294,7 +307,7 @@ def test_cli_config_overrides() -> None:
 
 
 def test_imitation_loss_weights_stop_and_ignores_unlabelled() -> None:
-    from ovon.train.common import imitation_loss
+    from ovon.train.batches import imitation_loss
 
     logits = torch.randn(2, 5, 6, generator=torch.Generator().manual_seed(0))
     target = torch.tensor([[0, 1, 2, -1, 3], [1, 1, 0, 2, -1]])
@@ -324,8 +337,9 @@ def test_evaluate_uses_the_camera_a_policy_was_trained_with(tmp_path) -> None:
 def test_expert_config_reaches_the_labelling_expert() -> None:
     """`--set frontier_expert.KEY=V` changes the expert that labels DAgger / BC states."""
     from ovon.config.base import ConfigError, build
+    from ovon.experts.factory import make_expert
     from ovon.train.config import TrainConfig, train_preset
-    from ovon.train.rollout import expert_config, make_expert
+    from ovon.train.run import expert_config
 
     cfg = build(TrainConfig, train_preset("tiny"), None, ["frontier_expert.turn_speed_deg=2.5",
                                                           "shortest_path_expert.turn_threshold_deg=30"])
@@ -337,11 +351,31 @@ def test_expert_config_reaches_the_labelling_expert() -> None:
         build(TrainConfig, train_preset("tiny"), None, ["frontier_expert.turn_sped_deg=1"])
 
 
+def test_expert_embodiment_follows_the_sim_and_task_config() -> None:
+    """The labelling expert's turn angle, step, FOV and stop radius come from `sim.*` / `task.*`: they
+    cannot disagree, and the experts' own configs no longer hold copies."""
+    from ovon.config.base import ConfigError, build
+    from ovon.env.stack import EnvRecipe, build_env
+    from ovon.experts.rig import Embodiment
+    from ovon.train.config import TrainConfig, train_preset
+
+    cfg = build(TrainConfig, train_preset("tiny"), None,
+                ["sim.agent.turn_angle_deg=15", "sim.agent.forward_step=0.2", "sim.camera.hfov_deg=79",
+                 "task.success_distance=0.1"])
+    env = build_env(EnvRecipe(sim=cfg.sim, task=cfg.task, scene="procedural:0", goal="bed", expert="frontier"))
+    body = env.expert.body
+    assert body == Embodiment(turn_angle_deg=15.0, forward_step_m=0.2, fov_deg=79.0, stop_distance_m=0.1)
+    env.close()
+    for key in ("turn_angle_deg", "forward_step_m", "fov_deg", "stop_distance_m"):
+        with pytest.raises(ConfigError, match=key):
+            build(TrainConfig, train_preset("tiny"), None, [f"frontier_expert.{key}=1"])
+
+
 def test_inner_viewpoints_keep_those_close_to_a_goal_box() -> None:
     from types import SimpleNamespace
 
+    from ovon.env.labels import inner_viewpoints
     from ovon.task.episode import GoalViewpoint
-    from ovon.train.rollout import inner_viewpoints
 
     box = SimpleNamespace(id=7, aabb_min=np.array([0.0, 0.0, 0.0]), aabb_max=np.array([1.0, 1.0, 1.0]))
     other = SimpleNamespace(id=8, aabb_min=np.array([5.0, 0.0, 5.0]), aabb_max=np.array([6.0, 1.0, 6.0]))
@@ -361,9 +395,9 @@ def test_cpu_small_features_end_to_end(tmp_path: Path, house_specs, table_path: 
     collision flag from the worker's encoder, no previous-action input, the inner-viewpoint frontier
     expert with a STOP weight; then a fine-tune that trains the (absent) prev-action group, and the agent."""
     from ovon.agents import make_agent
+    from ovon.env import make_objectnav
     from ovon.evaluate.runner import run_episode
     from ovon.experts.config import FrontierExpertConfig
-    from ovon.sim.env import ObjectNavEnv
     from ovon.train import train
 
     cfg = train_preset("tiny", algo="dagger", text_cache=table_path, stop_loss_weight=2.0,
@@ -381,7 +415,7 @@ def test_cpu_small_features_end_to_end(tmp_path: Path, house_specs, table_path: 
                        temperature=0.5)
     assert agent.policy.prev_action_emb is None and agent.policy.sim_parts == 1
     assert agent.image_encoder.dim == agent.policy.image_dim  # 1 text part + 8 depth + 1 collision
-    env = ObjectNavEnv(episodes=house_specs[:1], sim=cfg.sim, task=cfg.task)
+    env = make_objectnav(episodes=house_specs[:1], sim=cfg.sim, task=cfg.task, privileged=True)
     rec = run_episode(env, agent, house_specs[0], seed=0)
     env.close()
     assert 1 <= rec["steps"] <= cfg.task.max_steps

@@ -239,8 +239,10 @@ def test_clean_whole_word_rule(vocab: Vocabulary) -> None:
     assert clean("sofa chair") == "armchair"
     assert clean("refridgerator") == "refrigerator"
     assert clean("lampshade") == "lamp"
-    # unknown but not structural labels pass through normalised
-    assert clean("Weird  Gadget") == "weird gadget"
+    # labels outside the vocabulary are not goal categories (they used to pass through, which let free
+    # text such as "clutter" become goals); classify() says why
+    assert clean("Weird  Gadget") is None
+    assert vocab.label_map.classify("Weird  Gadget") == (None, "unmapped")
 
 
 # ---------------------------------------------------------------- synonym families

@@ -1,17 +1,21 @@
 """The privileged experts as agents: the shortest-path oracle and the frontier-exploration expert.
 
-Both read only `observation["privileged"]` (true pose, true map, goal viewpoints)."""
+Both read only `observation["privileged"]` (true pose, true map, goal viewpoints); their embodiment (turn
+angle, step, FOV, success radius) comes from the episode's own sim/task config."""
 
 from __future__ import annotations
 
-from ovon.experts import FrontierExpert, FrontierExpertConfig, ShortestPathExpert, ShortestPathExpertConfig
+from ovon.experts import FrontierExpertConfig, ShortestPathExpertConfig
+from ovon.experts.factory import make_expert
+from ovon.experts.rig import Embodiment
 
 
 class _ExpertAgent:
     privileged = True
 
-    def __init__(self, expert):
-        self.expert = expert
+    def __init__(self, name: str, cfg) -> None:
+        self.name, self.cfg = name, cfg
+        self.expert = None
         self._needs_reset = True
         self._last_action: int | None = None
 
@@ -22,6 +26,8 @@ class _ExpertAgent:
     def act(self, observation: dict) -> int:
         p = observation["privileged"]
         if self._needs_reset:
+            if self.expert is None or self.expert.body != Embodiment.of(p.sim, p.task):
+                self.expert = make_expert(self.name, self.cfg, p.sim, p.task)
             self.expert.reset(p.grid, [(v.position, v.yaw) for v in p.viewpoints], p.state)
             self._needs_reset = False
         action = int(self.expert.act(p.state, self._last_action))
@@ -31,9 +37,9 @@ class _ExpertAgent:
 
 class ShortestPathAgent(_ExpertAgent):
     def __init__(self, **kwargs):
-        super().__init__(ShortestPathExpert(ShortestPathExpertConfig(**kwargs)))
+        super().__init__("shortest-path", ShortestPathExpertConfig(**kwargs))
 
 
 class FrontierAgent(_ExpertAgent):
     def __init__(self, **kwargs):
-        super().__init__(FrontierExpert(FrontierExpertConfig(**kwargs)))
+        super().__init__("frontier", FrontierExpertConfig(**kwargs))

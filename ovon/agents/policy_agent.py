@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ovon.models.encoders import encode_observation
+
 
 class PolicyAgent:
     def __init__(self, checkpoint: str, deterministic: bool = True, device: str = "cpu", threads: int = 1,
@@ -24,8 +26,8 @@ class PolicyAgent:
         seeded per episode (reproducible). Argmax can lock an imitation policy into a turn-left /
         turn-right cycle; sampling breaks it, and a temperature < 1 keeps rare actions (STOP) rare."""
         from ovon.models.config import EncoderConfig
+        from ovon.models.encoders import TableTextEncoder
         from ovon.models.policy import ActorCritic
-        from ovon.train.common import TableTextEncoder
 
         if threads > 0:
             torch.set_num_threads(threads)
@@ -67,16 +69,14 @@ class PolicyAgent:
             batch = {"rgb": torch.from_numpy(np.ascontiguousarray(observation["rgb"]))[None].to(self.device),
                      "depth": torch.from_numpy(np.asarray(observation["depth"], np.float32))[None].to(self.device)}
             return self.policy.encode_images(batch)
+        semantic = None
         if self.privileged:
             p = observation["privileged"]
             if not self._scene_set:
                 self.image_encoder.set_scene({o.id: o.category for o in p.world.scene.objects if o.category})
                 self._scene_set = True
-            batch = {"semantic": p.frame.semantic[None], "depth": observation["depth"][None]}
-        else:
-            batch = {"rgb": observation["rgb"][None], "depth": observation["depth"][None]}
-        batch["collided"] = np.array([observation.get("collided", 0)])
-        return self.image_encoder.encode(batch).to(self.device)
+            semantic = p.frame.semantic
+        return torch.from_numpy(encode_observation(self.image_encoder, observation, semantic))[None].to(self.device)
 
     @torch.no_grad()
     def act(self, observation: dict) -> int:

@@ -112,9 +112,12 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     from ovon.scenes.hm3dsem import load_scene
-    from ovon.scenes.inspect import print_summary, summarize
+    from ovon.scenes.inspect import navigation_summary, print_summary, summarize
 
-    summary = summarize(load_scene(args.path))
+    scene = load_scene(args.path, up=args.up)
+    summary = summarize(scene)
+    if args.nav:
+        summary["navigation"] = navigation_summary(scene)
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
@@ -126,7 +129,7 @@ def cmd_render_topdown(args: argparse.Namespace) -> int:
     from ovon.scenes.hm3dsem import load_scene
     from ovon.scenes.topdown import render_topdown
 
-    out = render_topdown(load_scene(args.path), args.out, floor=args.floor)
+    out = render_topdown(load_scene(args.path, up=args.up), args.out, floor=args.floor)
     print(f"wrote {out}")
     return 0
 
@@ -143,19 +146,42 @@ def cmd_vocabulary(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from ovon.scenes.vocabulary import load_vocabulary
+    from ovon.scenes.vocabulary import hm3dsem_counts, label_coverage, load_vocabulary
 
     vocab = load_vocabulary()
+    console = Console()
+    if args.coverage:
+        cov = label_coverage(vocab.label_map, hm3dsem_counts())
+        if args.json:
+            print(json.dumps(cov, indent=1))
+            return 0
+        t = Table(title=f"HM3DSem v0.2 labels through ovon's cleaning ({cov['instances']:,} instances, "
+                        f"{cov['labels']:,} raw labels)")
+        for col in ("outcome", "instances", "share", "labels", "largest labels"):
+            t.add_column(col, justify="left" if col in ("outcome", "largest labels") else "right")
+        for k, n in cov["instances_by_outcome"].items():
+            top = ", ".join(f"{r} ({c})" for r, c in cov["top_labels"][k][:6])
+            t.add_row(k, f"{n:,}", f"{100 * cov['share_by_outcome'][k]:.1f}%", str(cov["labels_by_outcome"][k]), top)
+        console.print(t)
+        console.print(f"mapped instances fall in {cov['categories']} of the {len(vocab)} vocabulary categories; "
+                      "only mapped labels become goal categories")
+        return 0
     table = Table(title="Vocabulary")
-    for col in ("name", "family", "placement", "raw labels"):
+    for col in ("name", "family", "placement", "HM3DSem n", "raw labels"):
         table.add_column(col)
     for name in vocab.names:
         c = vocab[name]
-        table.add_row(c.name, c.family, c.placement, ", ".join(r for r in c.raw_labels if r != c.name))
-    console = Console()
+        table.add_row(c.name, c.family, c.placement, str(c.hm3dsem_instances),
+                      ", ".join(r for r in c.raw_labels if r != c.name))
     console.print(table)
     console.print(f"{len(vocab)} categories, {len({c.family for c in vocab.categories.values()})} shape families")
     return 0
+
+
+def add_up_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--up", default=None, metavar="AXIS",
+                   help="up axis of a scan / bare mesh: y, z, -z, x, ... or x,y,z (default: the habitat "
+                        "stage/scene-dataset config, else y)")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -173,12 +199,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     i = sub.add_parser("inspect", help="print a summary of one scene (folder or any of its files)")
     i.add_argument("path")
     i.add_argument("--json", action="store_true", help="print the summary as JSON")
+    i.add_argument("--nav", action="store_true", help="also build navigability: area, islands per floor")
+    add_up_argument(i)
     i.set_defaults(func=cmd_inspect)
 
     r = sub.add_parser("render-topdown", help="draw one scene from above (one panel per floor)")
     r.add_argument("path")
     r.add_argument("--out", required=True, help="PNG file to write")
     r.add_argument("--floor", type=int, default=None, help="only this floor index")
+    add_up_argument(r)
     r.set_defaults(func=cmd_render_topdown)
 
     ls = sub.add_parser("list", help="list the scene folders of a dataset tree")
@@ -186,5 +215,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ls.add_argument("--split", default=None)
     ls.set_defaults(func=cmd_list)
 
-    v = sub.add_parser("vocabulary", help="print the categories (name, family, placement)")
+    v = sub.add_parser("vocabulary", help="print the categories (name, family, placement, HM3DSem count)")
+    v.add_argument("--coverage", action="store_true",
+                   help="share of HM3DSem v0.2 instances mapped / structural / free text / unmapped")
+    v.add_argument("--json", action="store_true", help="with --coverage: print it as JSON")
     v.set_defaults(func=cmd_vocabulary)

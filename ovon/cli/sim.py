@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,20 +22,28 @@ def register(sub) -> None:
     gs = g.add_subparsers(dest="sim_command", required=True)
 
     v = gs.add_parser("view", help="render RGB | depth | semantic at a pose into one PNG")
-    v.add_argument("scene", help="scene folder/file (HM3DSem layout) or procedural:<seed>")
+    v.add_argument("scene", help="scene folder/file (HM3DSem layout, or a bare .glb/.gltf/.ply/.obj) or "
+                                 "procedural:<seed>")
+    # "-3,0,2,90" is a value, not an option: let the pose start with a minus sign
+    v._negative_number_matcher = re.compile(r"^-\d[\d.,eE+-]*$")
     v.add_argument("--pose", help="x,y,z,yaw_deg of the agent's feet (default: a random navigable pose)")
+    v.add_argument("--up", default=None, metavar="AXIS", help="up axis of a scan / bare mesh (y, z, -z, ...)")
     v.add_argument("--pitch", type=float, default=0.0, help="camera pitch in degrees, > 0 looks up")
     v.add_argument("--seed", type=int, default=0, help="seed of the random pose")
     _camera_args(v)
     v.add_argument("--out", required=True, help="output PNG")
     v.set_defaults(func=cmd_view)
 
-    b = gs.add_parser("bench", help="env steps/s (random moves/turns, auto-reset, RGB+depth+semantic)")
+    b = gs.add_parser("bench", help="env steps/s (random moves and turns, auto-reset; depth, semantic and RGB "
+                                    "unless --no-rgb)")
     b.add_argument("--scene", default="procedural:0")
     b.add_argument("--goal", help="goal category (default: the scene's most frequent floor object)")
     _camera_args(b)
-    b.add_argument("--workers", type=int, default=1, help="1: in this process; N > 1: N worker processes")
-    b.add_argument("--steps", type=int, default=500, help="timed env steps over all workers")
+    b.add_argument("--no-rgb", action="store_true", help="skip the RGB channel (what oracle encoders need)")
+    b.add_argument("--workers", type=int, default=1,
+                   help="worker processes of the vector env; 0: one env stepped in this process")
+    b.add_argument("--envs-per-worker", type=int, default=4, help="envs hosted by each worker process")
+    b.add_argument("--steps", type=int, default=1000, help="timed env steps over all envs")
     b.add_argument("--seed", type=int, default=0)
     b.set_defaults(func=cmd_bench)
 
@@ -89,7 +98,7 @@ def cmd_view(args) -> int:
     from ovon.sim.world import load_scene_any
 
     cam = _camera(args)
-    scene = load_scene_any(args.scene)
+    scene = load_scene_any(args.scene, up=args.up)
     if args.pose:
         pos, yaw = _parse_pose(args.pose)
     else:
@@ -100,7 +109,8 @@ def cmd_view(args) -> int:
         rng = np.random.default_rng(args.seed)
         grids = [g for g in nav.floors if g.navigable.any()]
         if not grids:
-            raise ValueError(f"scene {args.scene!r} has no navigable area for a random pose")
+            raise ValueError(f"scene {args.scene!r} has no navigable area for a random pose; pass --pose x,y,z,yaw "
+                             "(or --up if the scene is rotated)")
         pos = grids[int(rng.integers(len(grids)))].random_point(rng)
         yaw = float(rng.uniform(-math.pi, math.pi))
     renderer = make_renderer(scene, cam)
@@ -123,16 +133,25 @@ def cmd_view(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    import dataclasses
+
     from ovon.config.sim import SimConfig
-    from ovon.sim.vector import measure_throughput, pick_goal
+    from ovon.env.bench import measure_throughput, pick_goal
+    from ovon.env.stack import EnvRecipe
 
     os.environ.setdefault("LP_NUM_THREADS", "0")
-    if args.workers < 1 or args.steps < 1:
-        raise ValueError("--workers and --steps must be >= 1")
+    if args.workers < 0 or args.steps < 1 or args.envs_per_worker < 1:
+        raise ValueError(f"--workers must be >= 0 (got {args.workers}), --steps and --envs-per-worker >= 1 "
+                         f"(got {args.steps}, {args.envs_per_worker})")
     goal = args.goal or pick_goal(args.scene)
-    kwargs = dict(scene=args.scene, goal=goal, sim=SimConfig(camera=_camera(args)), privileged=True)
-    r = measure_throughput(kwargs, workers=args.workers, steps=args.steps, seed=args.seed)
-    print(f"scene {args.scene}, goal {goal!r}, {args.width}x{args.height}, backend {args.backend}, "
-          f"{r['workers']} worker(s): {r['steps']} steps in {r['seconds']:.2f} s (setup {r['setup_s']:.1f} s)")
+    cam = dataclasses.replace(_camera(args), rgb=not args.no_rgb)
+    recipe = EnvRecipe(sim=SimConfig(camera=cam), scene=args.scene, goal=goal)
+    envs = args.envs_per_worker * max(1, args.workers)
+    r = measure_throughput(recipe, workers=args.workers, envs=envs, steps=args.steps, seed=args.seed)
+    where = "in this process" if args.workers == 0 else f"{r['envs']} envs on {r['workers']} worker(s)"
+    channels = "depth+semantic" if args.no_rgb else "rgb+depth+semantic"
+    print(f"scene {args.scene}, goal {goal!r}, {args.width}x{args.height} {channels}, backend {args.backend}, "
+          f"{where}: {r['steps']} steps in {r['seconds']:.2f} s (setup {r['setup_s']:.1f} s, "
+          f"{r['cpu_ms_per_step']:.2f} CPU ms/step)")
     print(f"{r['steps_per_s']:.1f} steps/s")
     return 0

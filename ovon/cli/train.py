@@ -48,7 +48,7 @@ def build_config(args):
 
 def episode_list(args):
     if args.procedural:
-        from ovon.train.common import adhoc_specs, parse_seed_list
+        from ovon.train.episodes import adhoc_specs, parse_seed_list
 
         specs = adhoc_specs(parse_seed_list(args.procedural))
         return specs[: args.episodes] if args.episodes else specs

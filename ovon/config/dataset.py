@@ -28,6 +28,7 @@ class StartConfig:
     min_geo_euclid_ratio: float = 1.0  # paper's optional hard rule uses 1.05
     pointnav_ratio_rejection: bool = True  # keep w.p. 20*(r-0.98)^2 when r < 1.1
     max_tries: int = 2000
+    oracle_check: bool = True  # keep a start only if the shortest-path oracle finishes from it (grid rollout)
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,9 @@ class CameraConfig:
     min_depth: float = 0.5
     max_depth: float = 5.0
     backend: Literal["auto", "gl", "embree"] = "auto"
+    # Render the RGB channel. Off when no consumer reads it (oracle encoders need depth + semantic):
+    # saves the colour pass and its read-back. Depth and the semantic frame are always rendered.
+    rgb: bool = True
 
 
 @dataclass(frozen=True)

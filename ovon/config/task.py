@@ -10,6 +10,10 @@ class RewardConfig:
     kind: str = "dense"  # dense | sparse
     dense_success: float = 2.5
     dense_slack: float = -0.01  # paper; upstream code used -0.001
+    # Added when STOP is called outside the success region (paper: 0). RL from scratch at CPU scale:
+    # ending the episode at once avoids every later slack penalty, and PPO collapses to STOP-at-once
+    # within ~15k steps, long before it can learn where goals are; a failed-STOP cost removes that exit.
+    dense_failed_stop: float = 0.0
     sparse_success: float = 5.0
     sparse_slack: float = -0.001
     sparse_collision: float = -0.003

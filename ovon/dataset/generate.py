@@ -30,7 +30,7 @@ from ovon.config.dataset import GenerationConfig
 from ovon.config.sim import AgentConfig, CameraConfig, NavConfig
 from ovon.dataset.io import shard_exists, write_scene_shard, write_split_shell
 from ovon.dataset.records import Episode, ObjectGoal, ViewPoint, goal_key
-from ovon.geometry import yaw_to_quat
+from ovon.geometry import quat_to_yaw, yaw_to_quat
 
 VAL_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
 ALL_SPLITS = ("train", *VAL_SPLITS)
@@ -72,7 +72,10 @@ def scene_categories(ref: SceneRef) -> set[str]:
     vocab = load_vocabulary()
     txt = find_scene_files(ref.folder)["semantic_txt"]
     if txt is None:
-        raise FileNotFoundError(f"scene {ref.folder} has no .semantic.txt: it cannot give goal categories")
+        raise FileNotFoundError(
+            f"scene {ref.folder} has no semantic annotations ({ref.stem}.semantic.txt + {ref.stem}.semantic.glb): "
+            "ObjectNav episodes need them; add them or move the scene out of the scenes folder"
+        )
     return {c for e in parse_semantic_txt(txt) if (c := vocab.clean(e.raw_label))}
 
 
@@ -109,9 +112,9 @@ def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str]) -
             grid = nav.grid_for(obj.aabb_min)
             vps, why = object_viewpoints(obj, grid, renderer, vc)
             if why is None:
-                # Reachable = on an island where starts can be sampled.
-                big = grid.island_radius >= cfg.starts.min_island_radius
-                vps = [v for v in vps if (i := grid.island_of(v.position)) >= 0 and big[i]]
+                # Reachable = on an island where starts can be sampled (big enough, not a furniture top).
+                ok = set(grid.start_islands(cfg.starts.min_island_radius).tolist())
+                vps = [v for v in vps if grid.island_of(v.position) in ok]
                 if not vps:
                     why = "unreachable"
             if why is not None:
@@ -194,15 +197,18 @@ def episodes_job(job: dict) -> dict:
     for cat in queue:
         cats = [cat, *[c for c in children.get(cat, []) if c in goals]]
         main_floor = Counter(g["floor"] for g in goals[cat]).most_common(1)[0][0]
-        vps = np.array([vp["position"] for c in cats for g in goals[c] if g["floor"] == main_floor
-                        for vp in g["view_points"]], dtype=np.float64)
+        on_floor = [vp for c in cats for g in goals[c] if g["floor"] == main_floor for vp in g["view_points"]]
+        vps = np.array([vp["position"] for vp in on_floor], dtype=np.float64)
         grid = nav.floors[main_floor]
-        per_cat[cat] = (cats, grid, distance_field(grid, vps), vps)
+        fld = distance_field(grid, vps)
+        oracle_vps = [(np.asarray(vp["position"], dtype=np.float64), quat_to_yaw(vp["rotation"])) for vp in on_floor]
+        per_cat[cat] = (cats, grid, fld, vps, _oracle_accept(grid, fld, oracle_vps, cfg) if cfg.starts.oracle_check
+                        else None)
     dropped = set()
     while queue:
         for cat in list(queue):
-            cats, grid, fld, vps = per_cat[cat]
-            start = sample_start(grid, fld, vps, cfg.starts, rng, reasons)
+            cats, grid, fld, vps, accept = per_cat[cat]
+            start = sample_start(grid, fld, vps, cfg.starts, rng, reasons, accept)
             if start is None:
                 reasons["category_without_start"] += 1
                 dropped.add(cat)
@@ -240,6 +246,23 @@ def episodes_job(job: dict) -> dict:
         "seconds": round(time.perf_counter() - t0, 3), "rejections": dict(reasons),
         "dropped_categories": sorted(dropped),
     }
+
+
+def _oracle_accept(grid, fld, oracle_vps: list, cfg: GenerationConfig):  # noqa: ANN001, ANN202
+    """The start check of `StartConfig.oracle_check`: the shortest-path oracle, run from the start as the
+    episode file will hold it (rounded position and rotation), must finish."""
+    from ovon.config.task import TaskConfig
+    from ovon.dataset.starts import oracle_finishes
+
+    task = TaskConfig()
+    nd = cfg.decimals
+
+    def accept(p: np.ndarray, yaw: float) -> bool:
+        pos = np.asarray(_r(p, nd), dtype=np.float64)
+        return oracle_finishes(grid, pos, quat_to_yaw(_r(yaw_to_quat(yaw), nd)), oracle_vps, fld,
+                               task.max_steps, task.success_distance, AgentConfig())
+
+    return accept
 
 
 # -- allocation ------------------------------------------------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,6 +14,7 @@ from ovon.config.dataset import StartConfig
 
 REJECTION_REASONS = (
     "unreachable",
+    "oracle_cannot_finish",
     "too_close",
     "too_far",
     "ratio_below_min",
@@ -30,9 +32,12 @@ class Start:
 
 
 def sample_start(
-    grid, field, viewpoints: np.ndarray, cfg: StartConfig, rng: np.random.Generator, reasons: Counter
+    grid, field, viewpoints: np.ndarray, cfg: StartConfig, rng: np.random.Generator, reasons: Counter,
+    accept: Callable[[np.ndarray, float], bool] | None = None,
 ) -> Start | None:
-    """One start for a goal set (all viewpoints of the category and its children on this floor)."""
+    """One start for a goal set (all viewpoints of the category and its children on this floor).
+
+    `accept(position, yaw)`, when given, is the last check (the generator passes the oracle rollout)."""
     for _ in range(cfg.max_tries):
         p = grid.random_point(rng, cfg.min_island_radius)
         d = field.distance(p)
@@ -58,5 +63,25 @@ def sample_start(
         if len(path) and float(np.ptp(path[:, 1])) > cfg.max_height_span:
             reasons["multi_floor_path"] += 1
             continue
-        return Start(p, float(rng.uniform(-math.pi, math.pi)), d, euclid)
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        if accept is not None and not accept(p, yaw):
+            reasons["oracle_cannot_finish"] += 1
+            continue
+        return Start(p, yaw, d, euclid)
     return None
+
+
+def oracle_finishes(grid, position, yaw: float, viewpoints: list[tuple[np.ndarray, float]], field,
+                    max_steps: int, success_distance: float, agent=None) -> bool:  # noqa: ANN001
+    """Whether the shortest-path oracle (`ovon evaluate --agent shortest-path`, noise-free) finishes an
+    episode from this start: the same expert and kinematics on the same grid, without rendering.
+
+    Why: a distance field can pass where the discrete agent cannot (a corner it clips, a corridor at an
+    angle it cannot hold); a generated episode the oracle fails would count against every agent."""
+    from ovon.experts.gridsim import rollout
+    from ovon.experts.shortest_path import ShortestPathExpert
+    from ovon.sim.types import AgentState
+
+    state = AgentState(np.asarray(position, dtype=np.float64).copy(), float(yaw), 0.0)
+    states, actions, _ = rollout(ShortestPathExpert(), grid, state, viewpoints, max_steps=max_steps, agent=agent)
+    return bool(actions) and actions[-1] == 0 and field.distance(states[-1].position) < success_distance

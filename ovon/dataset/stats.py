@@ -44,9 +44,10 @@ def split_stats(root: str | Path, split: str) -> dict:
         "goal_instances": len(instances),
         "episodes_per_category": dict(sorted(cats.items(), key=lambda kv: (-kv[1], kv[0]))),
         "geodesic_distance": {
-            "mean": float(np.mean(geo)) if geo else float("nan"),
-            "min": float(np.min(geo)) if geo else float("nan"),
-            "max": float(np.max(geo)) if geo else float("nan"),
+            # None (JSON null, printed "–") for a split without episodes: never NaN in a table or file
+            "mean": float(np.mean(geo)) if geo else None,
+            "min": float(np.min(geo)) if geo else None,
+            "max": float(np.max(geo)) if geo else None,
             "histogram_edges_m": list(HIST_EDGES),
             "histogram": [int(x) for x in hist],
         },
@@ -81,8 +82,9 @@ def format_stats(stats: dict) -> str:
         g = st["geodesic_distance"]
         edges = g["histogram_edges_m"]
         hist = " ".join(f"{a}-{b}:{n}" for a, b, n in zip(edges, edges[1:], g["histogram"]))
+        mean = "–" if g["mean"] is None else f"{g['mean']:.2f}"
         lines.append(f"| {s} | {st['scenes']} | {st['episodes']} | {st['categories']} | {st['goal_instances']} "
-                     f"| {g['mean']:.2f} | {hist} |")
+                     f"| {mean} | {hist} |")
     if "category_split" in stats:
         lines += ["", "| category split | categories | similarity range |", "|---|---|---|"]
         for s, v in stats["category_split"].items():

@@ -91,28 +91,27 @@ _CACHE: dict = {}
 
 def run_unit(unit: dict) -> list[dict]:
     """Runs a chunk of episodes of one scene; env and agent are cached per process across chunks."""
-    from ovon.agents import make_agent
+    from ovon.agents import is_privileged, make_agent
+    from ovon.config.base import from_dict
+    from ovon.env.stack import EnvRecipe, build_env
     from ovon.evaluate.runner import run_episode
-    from ovon.sim.env import ObjectNavEnv
 
     init_worker()
-    key = (json.dumps(unit["sim"], sort_keys=True), json.dumps(unit["task"], sort_keys=True))
-    if _CACHE.get("env_key") != key:
-        if "env" in _CACHE:
-            _CACHE["env"].close()
-        from ovon.config.base import from_dict
-
-        _CACHE["env"] = ObjectNavEnv(
-            episodes=unit["specs"][:1],
-            sim=from_dict(SimConfig, unit["sim"]),
-            task=from_dict(TaskConfig, unit["task"]),
-        )
-        _CACHE["env_key"] = key
     agent_key = (unit["agent"], json.dumps(unit["agent_kwargs"], sort_keys=True))
     if _CACHE.get("agent_key") != agent_key:
         _CACHE["agent"] = make_agent(unit["agent"], **unit["agent_kwargs"])
         _CACHE["agent_key"] = agent_key
-    env, agent = _CACHE["env"], _CACHE["agent"]
+    agent = _CACHE["agent"]
+    privileged = is_privileged(agent)
+    key = (json.dumps(unit["sim"], sort_keys=True), json.dumps(unit["task"], sort_keys=True), privileged)
+    if _CACHE.get("env_key") != key:
+        if "env" in _CACHE:
+            _CACHE["env"].close()
+        recipe = EnvRecipe(sim=from_dict(SimConfig, unit["sim"]), task=from_dict(TaskConfig, unit["task"]),
+                           episodes=unit["specs"][:1], sample_episodes=False, privileged=privileged)
+        _CACHE["env"] = build_env(recipe)
+        _CACHE["env_key"] = key
+    env = _CACHE["env"]
     return [run_episode(env, agent, spec, unit["seed"]) for spec in unit["specs"]]
 
 

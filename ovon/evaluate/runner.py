@@ -6,6 +6,7 @@ import dataclasses
 import zlib
 
 from ovon.agents.base import is_privileged
+from ovon.env.privileged import privileged_of
 from ovon.task.episode import EpisodeSpec
 
 
@@ -15,9 +16,11 @@ def episode_seed(seed: int, split: str, episode_id: str, scene: str) -> int:
 
 
 def run_episode(env, agent, spec: EpisodeSpec, seed: int, record_path: bool = False) -> dict:
+    """`env` is an `ovon.env` stack, with `PrivilegedInfo` when the agent is privileged: such an agent
+    gets `observation["privileged"]`; any other agent sees only the robot's observations."""
     ep_seed = episode_seed(seed, spec.split, spec.episode_id, spec.scene)
     obs, info = env.reset(seed=ep_seed, options={"episode": spec})
-    unwrapped = env.unwrapped
+    truth = env.unwrapped  # the harness's own bookkeeping (paths for videos) may read ground truth
     agent.reset(
         {
             "episode_id": spec.episode_id,
@@ -26,22 +29,26 @@ def run_episode(env, agent, spec: EpisodeSpec, seed: int, record_path: bool = Fa
             "goal": spec.goal_category,
             "seed": ep_seed,
             # the robot's calibration (not privileged): camera intrinsics and body, for agents that map
-            "camera": dataclasses.asdict(unwrapped.sim_cfg.camera),
-            "embodiment": dataclasses.asdict(unwrapped.sim_cfg.agent),
+            "camera": dataclasses.asdict(truth.sim_cfg.camera),
+            "embodiment": dataclasses.asdict(truth.sim_cfg.agent),
         }
     )
     privileged = is_privileged(agent)
-    path = [[*map(float, info["position"]), float(info["yaw"])]]
+
+    def pose() -> list[float]:
+        s = truth.privileged().state
+        return [*map(float, s.position), float(s.yaw)]
+
+    path = [pose()] if record_path else []
     actions: list[int] = []
     while True:
         if privileged:
-            obs = dict(obs)
-            obs["privileged"] = unwrapped.privileged()
+            obs = {**obs, "privileged": privileged_of(info)}
         action = int(agent.act(obs))
         obs, _reward, terminated, truncated, info = env.step(action)
         actions.append(action)
         if record_path:
-            path.append([*map(float, info["position"]), float(info["yaw"])])
+            path.append(pose())
         if terminated or truncated:
             break
     m = info["metrics"]

@@ -1,4 +1,7 @@
-"""Expert configs: every number of the paper's expert is a config value (expert.md)."""
+"""Expert configs: every number of the paper's expert is a config value (expert.md).
+
+The agent's turn angle and forward step, the camera's FOV and the success radius are NOT here: the
+experts derive them from the sim/task config (`ovon.experts.rig.Embodiment`), their one source."""
 
 from __future__ import annotations
 
@@ -10,17 +13,13 @@ from typing import Literal
 class FrontierExpertConfig:
     """Frontier-exploration teacher (expert.md); defaults are the paper's / upstream's values."""
 
-    fov_deg: float = 42.0  # horizontal FOV of the Stretch camera
     view_range_m: float = 3.0  # cells further than this never become explored
     pocket_area_m2: float = 1.5  # unexplored components smaller than this (m^2) count as explored
     linear_speed: float = 0.25  # m/s, for the estimated time of a frontier
     turn_speed_deg: float = 10.0  # deg/s, for the estimated time of a frontier
     beeline_distance_m: float = 3.5  # geodesic distance to the nearest viewpoint that starts the bee-line
-    stop_distance_m: float = 0.25  # success radius around a viewpoint
     stop_margin_m: float = 0.05  # stop this much inside the success radius (grid lookups are +-half a cell)
     stop_heading_tol_deg: float = 15.0  # final turn to the viewpoint's heading
-    turn_angle_deg: float = 30.0  # one TURN_LEFT / TURN_RIGHT
-    forward_step_m: float = 0.25  # one MOVE_FORWARD (collision prediction and detection)
     # spec: turn when the next waypoint is more than one turn (30 deg) off; 15 (half a turn) is straighter
     turn_threshold_deg: float = 30.0
     lookahead_m: float = 1.0  # furthest path point (in line of sight) used as the heading target
@@ -37,11 +36,8 @@ class FrontierExpertConfig:
 class ShortestPathExpertConfig:
     """Shortest-path (SPOC-style) expert: forward whenever the waypoint is within half a turn."""
 
-    stop_distance_m: float = 0.25
     stop_margin_m: float = 0.05
     stop_heading_tol_deg: float = 15.0
-    turn_angle_deg: float = 30.0
-    forward_step_m: float = 0.25
     turn_threshold_deg: float = 15.0  # half a turn: the heading error after a turn is always <= 15 deg
     lookahead_m: float = 1.0
     turn_to_viewpoint_heading: bool = True

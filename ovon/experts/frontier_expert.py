@@ -31,6 +31,7 @@ from ovon.experts.control import (
     nearest_path_index,
     trace_parents,
 )
+from ovon.experts.rig import Embodiment
 from ovon.experts.shortest_path import (
     DistanceFieldFn,
     GoalFollower,
@@ -46,8 +47,12 @@ from ovon.sim.types import AgentState
 class FrontierExpert:
     """Frontier-exploration expert; `timing` holds the last step's ms per phase for the benchmark."""
 
-    def __init__(self, cfg: FrontierExpertConfig | None = None, distance_field_fn: DistanceFieldFn | None = None):
+    def __init__(self, cfg: FrontierExpertConfig | None = None, body: Embodiment | None = None,
+                 distance_field_fn: DistanceFieldFn | None = None):
+        """`body`: turn angle, step, FOV and success radius (default: those of the default sim/task
+        configs; `ovon.experts.rig.make_expert` derives them from the run's configs)."""
         self.cfg = cfg or FrontierExpertConfig()
+        self.body = body or Embodiment.of()
         self._field_fn = distance_field_fn
         self.grid: Any = None
         self.explored_map: ExploredMap | None = None
@@ -67,7 +72,7 @@ class FrontierExpert:
             cs = float(grid.cell_size)
             nav = np.ascontiguousarray(grid.navigable, dtype=np.bool_)
             free = np.ascontiguousarray(getattr(grid, "free", nav), dtype=np.bool_) | nav
-            self.explored_map = ExploredMap(free, nav, cs, cfg.fov_deg, cfg.view_range_m)
+            self.explored_map = ExploredMap(free, nav, cs, self.body.fov_deg, cfg.view_range_m)
             min_cells = max(1, int(math.ceil(cfg.min_frontier_m / cs - 1e-9)))
             self.frontier_map = FrontierMap(nav, self.explored_map.explored, cs, cfg.pocket_area_m2, min_cells)
             self.navigable = nav
@@ -83,7 +88,8 @@ class FrontierExpert:
             self._bcell = np.empty((32, cap), dtype=np.int64)  # frontier search bucket queue
             self._bg = np.empty((32, cap), dtype=np.int64)
             self.steering = Steering(
-                grid, math.radians(cfg.turn_threshold_deg), math.radians(cfg.turn_angle_deg), cfg.forward_step_m
+                grid, math.radians(cfg.turn_threshold_deg), math.radians(self.body.turn_angle_deg),
+                self.body.forward_step_m,
             )
         assert self.explored_map is not None and self.frontier_map is not None
         self.explored_map.reset()
@@ -141,7 +147,7 @@ class FrontierExpert:
         steer.observe(state.position, state.yaw, last_action)
         d = follower.distance(state.position)
         err: float | None
-        if d <= cfg.stop_distance_m - cfg.stop_margin_m:
+        if d <= self.body.stop_distance_m - cfg.stop_margin_m:
             self.mode = "stop"
             action = follower.stop_action(state, math.radians(cfg.stop_heading_tol_deg))
             steer.record(state.position, state.yaw, action)

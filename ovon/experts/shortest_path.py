@@ -22,6 +22,7 @@ from ovon.experts.control import (
     lookahead_index,
     turn_action_to_yaw,
 )
+from ovon.experts.rig import Embodiment
 from ovon.sim.types import AgentState
 
 Viewpoint = tuple[Any, float]  # (position (3,), yaw)
@@ -115,9 +116,11 @@ class ShortestPathExpert:
     def __init__(
         self,
         cfg: ShortestPathExpertConfig | None = None,
+        body: Embodiment | None = None,
         distance_field_fn: DistanceFieldFn | None = None,
     ) -> None:
         self.cfg = cfg or ShortestPathExpertConfig()
+        self.body = body or Embodiment.of()  # turn, step, FOV, success radius (ovon.experts.rig)
         self._field_fn = distance_field_fn
         self.follower: GoalFollower | None = None
         self.steering: Steering | None = None
@@ -130,7 +133,8 @@ class ShortestPathExpert:
         self.grid = grid
         self.follower = GoalFollower(grid, goal_viewpoints, fn, cfg.lookahead_m)
         self.steering = Steering(
-            grid, math.radians(cfg.turn_threshold_deg), math.radians(cfg.turn_angle_deg), cfg.forward_step_m
+            grid, math.radians(cfg.turn_threshold_deg), math.radians(self.body.turn_angle_deg),
+            self.body.forward_step_m,
         )
         self.mode = "idle"
 
@@ -147,7 +151,7 @@ class ShortestPathExpert:
         if not math.isfinite(d):
             self.mode = "unreachable"
             action = STOP
-        elif d <= cfg.stop_distance_m - cfg.stop_margin_m:
+        elif d <= self.body.stop_distance_m - cfg.stop_margin_m:
             self.mode = "stop"
             action = self.follower.stop_action(
                 state, math.radians(cfg.stop_heading_tol_deg), cfg.turn_to_viewpoint_heading

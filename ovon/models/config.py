@@ -71,6 +71,10 @@ class PolicyConfig:
     # the image-text score a VLM agent computes anyway (VLFM's value map); a linear input layer cannot
     # form a product of two of its inputs, and learning it costs far more steps than a CPU run has.
     goal_similarity: bool = False
+    # Initial bias of the STOP logit (0 = a uniform initial policy). RL from scratch: a uniform policy
+    # STOPs every 6th step, so early episodes end before the dense reward can teach anything (and the env
+    # spends its time resetting); -4 makes a random STOP rare (~0.4% per step) without forbidding it.
+    stop_bias: float = 0.0
 
 
 def text_aligned_parts(cfg: EncoderConfig) -> int:

@@ -70,6 +70,8 @@ class ActorCritic(nn.Module):
         self.critic_head = nn.Linear(self.core.out_dim, 1)
         nn.init.normal_(self.action_head.weight, std=0.01)  # near-uniform initial policy (RL)
         nn.init.zeros_(self.action_head.bias)
+        with torch.no_grad():
+            self.action_head.bias[0] = cfg.stop_bias  # STOP is action 0
 
     @staticmethod
     def _make_core(cfg: PolicyConfig) -> nn.Module:

@@ -63,8 +63,8 @@ def _fit(img: np.ndarray, h: int) -> np.ndarray:
 
 def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: str | None = None,
                  seed: int | None = None, fps: int = 8, scene: str | None = None) -> Path:
+    from ovon.env import make_objectnav
     from ovon.evaluate.harness import load_specs
-    from ovon.sim.env import ObjectNavEnv
 
     run_dir = Path(run_dir)
     meta_path = run_dir / "run.json"
@@ -90,32 +90,32 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
         raise KeyError(f"episode {episode_id!r} of {rec['scene']} not found in {meta['data']}/{rec['split']}")
     spec = specs[0]
     sim = from_dict(SimConfig, meta["sim"])
-    env = ObjectNavEnv(episodes=[spec], sim=sim, task=from_dict(TaskConfig, meta["task"]), privileged=True)
+    env = make_objectnav(episodes=[spec], sim=sim, task=from_dict(TaskConfig, meta["task"]), privileged=True)
     obs, info = env.reset(seed=episode_seed(rec["seed"], spec.split, spec.episode_id, spec.scene),
                           options={"episode": spec})
-    p = env.privileged()
+    p = info["privileged"]
     goals = [(np.asarray(o.aabb_min), np.asarray(o.aabb_max)) for o in p.world.scene.objects if o.id in p.goal_ids]
     top = TopDown(p.grid, np.array([v.position for v in p.viewpoints]), goals, size=360)
-    path = [info["position"]]
+    path = [p.state.position]
     frames = []
     h = 240
 
     def frame(o, inf, text):
         rgb = _fit(o["rgb"], h)
         depth = _fit(_depth_to_rgb(o["depth"], sim.camera.max_depth), h)
-        td = _fit(top.draw(path, inf["yaw"]), h)
+        td = _fit(top.draw(path, inf["privileged"].state.yaw), h)
         img = np.concatenate([rgb, depth, td], axis=1)
         bar = np.full((28, img.shape[1], 3), 255, np.uint8)
         cv2.putText(bar, text, (6, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
         return np.concatenate([bar, img], axis=0)
 
-    frames.append(frame(obs, info, f"goal: {spec.goal_category}  step 0  d={info['distance_to_goal']:.2f} m"))
+    frames.append(frame(obs, info, f"goal: {spec.goal_category}  step 0  d={p.distance_to_goal:.2f} m"))
     names = ("STOP", "FORWARD", "LEFT", "RIGHT", "UP", "DOWN")
     for t, a in enumerate(rec["actions"], 1):
         obs, _, term, trunc, info = env.step(a)
-        path.append(info["position"])
+        path.append(info["privileged"].state.position)
         frames.append(frame(obs, info, f"goal: {spec.goal_category}  step {t} {names[a]}  "
-                                       f"d={info['distance_to_goal']:.2f} m"))
+                                       f"d={info['privileged'].distance_to_goal:.2f} m"))
         if term or trunc:
             break
     env.close()

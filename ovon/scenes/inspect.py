@@ -6,6 +6,8 @@ from __future__ import annotations
 from collections import Counter
 from typing import Any
 
+import numpy as np
+
 from ovon.scenes.model import Scene
 
 
@@ -34,12 +36,34 @@ def summarize(scene: Scene) -> dict[str, Any]:
         "bounds_max": None if hi is None else [round(float(v), 3) for v in hi],
         "floors": [round(float(h), 3) for h in scene.floor_heights],
         "rooms": rooms,
+        "annotations": "none: " + scene.semantics_missing if scene.semantics_missing else "HM3DSem",
         "objects_total": len(scene.objects),
         "objects_kept": len(kept),
         "objects_dropped": len(dropped),
         "dropped_labels": dict(Counter(o.raw_label for o in dropped).most_common()),
         "categories": dict(sorted(cats.items(), key=lambda kv: (-kv[1], kv[0]))),
     }
+
+
+def navigation_summary(scene: Scene, agent=None, nav=None) -> list[dict[str, Any]]:  # noqa: ANN001
+    """Per floor: navigable area, islands, and the area on islands where starts can be sampled."""
+    from ovon.config.dataset import StartConfig
+    from ovon.sim.navgrid import build_navigation
+
+    sn = build_navigation(scene, agent, nav)
+    min_r = StartConfig().min_island_radius
+    out = []
+    for g in sn.floors:
+        cell = g.cell_size * g.cell_size
+        big = g.island_radius >= min_r
+        out.append({
+            "floor": g.floor, "height": round(float(g.height), 3),
+            "navigable_m2": round(float(g.navigable.sum()) * cell, 2),
+            "islands": g.num_islands,
+            "start_area_m2": round(float(g.island_area[big].sum()), 2),
+            "narrow_removed_m2": round(float(getattr(g, "narrow", np.zeros(1, bool)).sum()) * cell, 2),
+        })  # fmt: skip
+    return out
 
 
 def print_summary(summary: dict[str, Any], console: Any = None, max_categories: int = 60) -> None:
@@ -58,7 +82,9 @@ def print_summary(summary: dict[str, Any], console: Any = None, max_categories: 
     over.add_row("triangles", tri)
     over.add_row("textured", "yes" if summary["textured"] else "no")
     over.add_row("bounds", f"{summary['bounds_min']} .. {summary['bounds_max']}")
-    over.add_row("floors (y, m)", ", ".join(f"{h:.2f}" for h in summary["floors"]) or "-")
+    over.add_row("floors (y, m)", ", ".join(f"{h:.2f}" for h in summary["floors"])
+                 or "none found (no upward horizontal face: is the up axis right? see --up)")
+    over.add_row("annotations", summary["annotations"])
     over.add_row("rooms", str(len(summary["rooms"])))
     over.add_row(
         "objects",
@@ -69,6 +95,10 @@ def print_summary(summary: dict[str, Any], console: Any = None, max_categories: 
     if summary["dropped_labels"]:
         top = ", ".join(f"{k} ({v})" for k, v in list(summary["dropped_labels"].items())[:8])
         over.add_row("dropped labels", top)
+    for f in summary.get("navigation", []):
+        over.add_row(f"floor {f['floor']} navigable", f"{f['navigable_m2']:.1f} m² at y={f['height']:.2f} in "
+                     f"{f['islands']} islands; {f['start_area_m2']:.1f} m² on islands big enough for starts; "
+                     f"{f['narrow_removed_m2']:.1f} m² of strips too narrow to drive removed")
     console.print(over)
 
     if summary["rooms"]:

@@ -72,12 +72,20 @@ class Scene:
     semantic_mesh: Mesh | None = None  # separate semantic mesh (real scans); None: `mesh` carries ids
     semantic_colors: dict[int, tuple[int, int, int]] = field(default_factory=dict)  # id -> RGB
     source: str = ""  # path it was loaded from, or "procedural:<seed>"
+    semantics_missing: str = ""  # non-empty for a bare mesh without annotations: which files are missing
 
     def object_by_id(self, instance_id: int) -> ObjectInstance:
         for o in self.objects:
             if o.id == instance_id:
                 return o
         raise KeyError(f"scene {self.scene_id} has no object with instance id {instance_id}")
+
+    def require_semantics(self, purpose: str = "ObjectNav goals") -> None:
+        """Raise the one-line error of a task that needs instance annotations on a bare mesh."""
+        if self.semantics_missing:
+            raise ValueError(
+                f"scene {self.scene_id}: {purpose} need semantic annotations, but {self.semantics_missing}"
+            )
 
     def objects_of(self, category: str) -> list[ObjectInstance]:
         return [o for o in self.objects if o.category == category]

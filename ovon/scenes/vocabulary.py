@@ -8,7 +8,7 @@ categories must not, otherwise the val_seen_synonyms / val_unseen splits would m
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from importlib import resources
 from typing import Literal
@@ -96,31 +96,113 @@ class Category:
     rooms: dict[str, float]  # room type -> affinity weight (> 0)
     colors: tuple[tuple[int, int, int], ...]  # base RGB colours; instances vary around one of them
     is_surface: bool = False  # small objects can be placed on top of it
-    frequency: float = 1.0  # relative chance of being placed when its room is furnished
+    frequency: float = 1.0  # relative chance of being placed when its room is furnished (from HM3DSem counts)
+    hm3dsem_instances: int = 0  # instances of this category in HM3DSem v0.2 (after cleaning)
+
+
+# mpcat40 classes of habitat-sim's HM3DSem table that are parts of the building, not objects
+STRUCTURAL_MPCAT40 = frozenset({"wall", "floor", "ceiling", "door", "window", "stairs", "railing", "beam", "column"})
+LABEL_OUTCOMES = ("mapped", "structural", "free text", "unmapped")
+
+
+def normalize_label(raw: str) -> str:
+    return " ".join(raw.strip().lower().replace("_", " ").split())
 
 
 @dataclass(frozen=True)
 class LabelMap:
-    """raw label -> canonical category; drop words matched as whole words."""
+    """Raw annotation label -> canonical vocabulary category, or why it is not a goal category.
+
+    Order (first match wins): our mapping (vocabulary raw labels + `mapping` of label_map.yaml), the same
+    after habitat-sim's typo fix and after dropping a room prefix ("kitchen sink"); free text (a `vague`
+    label or head noun: "clutter", "kitchen appliance", habitat-sim's "unknown"); structural (a drop
+    word as head noun, habitat-sim's mpcat40 class is a building part, or a structural word with a part
+    noun as head: "door frame", "ceiling vent"); free text again for "<x> of <y>" ("basket of
+    something"); else unmapped (an object name outside the vocabulary). Only mapped labels are goals.
+    """
 
     mapping: dict[str, str]
     drop_words: tuple[str, ...]
     provenance: str = ""
+    typo_fixes: dict[str, str] = field(default_factory=dict)  # habitat-sim: raw -> cleaned name
+    mpcat40: dict[str, str] = field(default_factory=dict)  # habitat-sim: raw -> mpcat40 class
+    structural_words: tuple[str, ...] = ()
+    part_words: tuple[str, ...] = ()
+    vague: tuple[str, ...] = ()
+    room_prefixes: tuple[str, ...] = ()
+    fixtures: tuple[str, ...] = ()  # whole labels that are building fixtures (taps, rods, sensors)
 
-    def clean(self, raw: str) -> str | None:
-        """Canonical category for an annotated label, or None when it is structural/vague."""
-        label = " ".join(raw.strip().lower().replace("_", " ").split())
+    def classify(self, raw: str) -> tuple[str | None, str]:
+        """(category or None, outcome) with outcome one of LABEL_OUTCOMES (or "empty")."""
+        label = normalize_label(raw)
         if not label:
-            return None
+            return None, "empty"
+        hit = self._lookup(label)
+        if hit is not None:
+            return hit, "mapped"
+        if self._vague(label):  # before habitat's fixes, which turn e.g. "wall decoration" into "picture"
+            return None, "free text"
+        fixed = self.typo_fixes.get(label, label)
+        hit = self._lookup(fixed)
+        if hit is not None:
+            return hit, "mapped"
+        words = re.findall(r"[a-z0-9]+", fixed)
+        if not words or self._vague(fixed) or fixed == "unknown":
+            return None, "free text"
+        head = words[-1]
+        if (
+            head in self.drop_words
+            or fixed in self.fixtures
+            or label in self.fixtures
+            or self.mpcat40.get(label) in STRUCTURAL_MPCAT40
+            or (head in self.part_words and any(w in self.structural_words for w in words[:-1]))
+        ):
+            return None, "structural"
+        if " of " in f" {fixed} ":
+            return None, "free text"
+        return None, "unmapped"
+
+    def _vague(self, label: str) -> bool:
+        words = re.findall(r"[a-z0-9]+", label)
+        return label in self.vague or bool(words) and words[-1] in self.vague
+
+    def _lookup(self, label: str) -> str | None:
         if label in self.mapping:
             return self.mapping[label]
-        # Whole-word rule: a label is structural when its head noun (last word) is a drop word, so
-        # "wall" and "kitchen wall" go while "floor lamp" and "wall clock" stay (upstream's substring
-        # test dropped those by accident).
-        words = re.findall(r"[a-z0-9]+", label)
-        if words and words[-1] in self.drop_words:
-            return None
-        return label
+        for prefix in self.room_prefixes:
+            if label.startswith(prefix + " ") and label[len(prefix) + 1 :] in self.mapping:
+                return self.mapping[label[len(prefix) + 1 :]]
+        return None
+
+    def clean(self, raw: str) -> str | None:
+        """Canonical category for an annotated label, or None when it is not a goal category."""
+        return self.classify(raw)[0]
+
+
+def label_coverage(label_map: LabelMap, counts: dict[str, int]) -> dict:
+    """Shares of instances per outcome over a {raw label: instance count} table, plus the biggest
+    labels of each non-mapped outcome (what to add to label_map.yaml next)."""
+    total = sum(counts.values())
+    by: dict[str, int] = dict.fromkeys(LABEL_OUTCOMES, 0)
+    top: dict[str, list] = {k: [] for k in LABEL_OUTCOMES}
+    cats: dict[str, int] = {}
+    for raw, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])):
+        cat, outcome = label_map.classify(raw)
+        outcome = "free text" if outcome == "empty" else outcome
+        by[outcome] += n
+        top[outcome].append((raw, n))
+        if cat is not None:
+            cats[cat] = cats.get(cat, 0) + n
+    return {
+        "instances": total,
+        "labels": len(counts),
+        "instances_by_outcome": by,
+        "share_by_outcome": {k: (v / total if total else 0.0) for k, v in by.items()},
+        "labels_by_outcome": {k: len(v) for k, v in top.items()},
+        "top_labels": {k: v[:15] for k, v in top.items()},
+        "categories": len(cats),
+        "instances_by_category": dict(sorted(cats.items(), key=lambda kv: (-kv[1], kv[0]))),
+    }
 
 
 @dataclass
@@ -181,7 +263,15 @@ def _color(v, where: str) -> tuple[int, int, int]:
     raise ValueError(f"{where}: bad colour {v!r}")
 
 
-def parse_vocabulary(cats_doc: dict, map_doc: dict, source: str = "") -> Vocabulary:
+def parse_vocabulary(
+    cats_doc: dict,
+    map_doc: dict,
+    source: str = "",
+    habitat_table: tuple[dict[str, str], dict[str, str]] | None = None,
+    counts: dict[str, int] | None = None,
+) -> Vocabulary:
+    """Vocabulary from its two YAML documents; `habitat_table` = (typo fixes, mpcat40) of habitat-sim's
+    HM3DSem table; `counts` = HM3DSem instance counts per raw label, which set the placement frequencies."""
     cats: dict[str, Category] = {}
     for i, entry in enumerate(cats_doc.get("categories", [])):
         where = f"{source} categories[{i}] ({entry.get('name', '?')})"
@@ -222,7 +312,18 @@ def parse_vocabulary(cats_doc: dict, map_doc: dict, source: str = "") -> Vocabul
         for raw in cat.raw_labels:
             mapping.setdefault(raw, cat.name)
     drop = tuple(str(w).lower() for w in map_doc.get("drop_words", []))
-    return Vocabulary(cats, LabelMap(mapping, drop, str(map_doc.get("provenance", ""))))
+
+    def words(key: str) -> tuple[str, ...]:
+        return tuple(normalize_label(str(w)) for w in map_doc.get(key, []))
+
+    fixes, mpcat = habitat_table or ({}, {})
+    label_map = LabelMap(mapping, drop, str(map_doc.get("provenance", "")), fixes, mpcat,
+                         words("structural_words"), words("part_words"), words("vague"), words("room_prefixes"),
+                         words("fixtures"))
+    vocab = Vocabulary(cats, label_map)
+    if counts:
+        vocab.categories = _real_frequencies(vocab, counts)
+    return vocab
 
 
 @lru_cache(maxsize=1)
@@ -231,4 +332,56 @@ def load_vocabulary() -> Vocabulary:
     data = resources.files("ovon.scenes") / "data"
     cats_doc = yaml.safe_load((data / "vocabulary.yaml").read_text())
     map_doc = yaml.safe_load((data / "label_map.yaml").read_text())
-    return parse_vocabulary(cats_doc, map_doc, source="ovon/scenes/data/vocabulary.yaml")
+    return parse_vocabulary(cats_doc, map_doc, source="ovon/scenes/data/vocabulary.yaml",
+                            habitat_table=habitat_table(), counts=hm3dsem_counts())
+
+
+def habitat_table() -> tuple[dict[str, str], dict[str, str]]:
+    """habitat-sim's HM3DSem mapping table (MIT): (raw -> cleaned name, raw -> mpcat40 class)."""
+    text = (resources.files("ovon.scenes") / "data" / "hm3dsem_category_mappings.tsv").read_text(encoding="utf-8")
+    fixes: dict[str, str] = {}
+    mpcat: dict[str, str] = {}
+    for line in text.splitlines()[1:]:
+        parts = line.split("\t")
+        if len(parts) != 3:
+            continue
+        raw = normalize_label(parts[0])
+        fixes[raw] = normalize_label(parts[1])
+        mpcat[raw] = parts[2].strip()
+    return fixes, mpcat
+
+
+@lru_cache(maxsize=1)
+def hm3dsem_counts() -> dict[str, int]:
+    """Instance count of every raw label in HM3DSem v0.2 (normalised labels, duplicates summed)."""
+    text = (resources.files("ovon.scenes") / "data" / "hm3dsem_v0.2_raw_label_counts.csv").read_text(encoding="utf-8")
+    out: dict[str, int] = {}
+    for line in text.splitlines()[1:]:
+        label, sep, n = line.rpartition(";")
+        if sep and n.strip().isdigit():
+            key = normalize_label(label)
+            out[key] = out.get(key, 0) + int(n)
+    return out
+
+
+# Placement frequency from HM3DSem counts: sqrt keeps rare categories possible while common ones
+# (chair, pillow, picture, lamp) dominate as they do in real houses; categories HM3DSem never
+# annotates get the floor value.
+FREQ_FLOOR, FREQ_CAP = 0.05, 8.0
+
+
+def _real_frequencies(vocab: Vocabulary, counts: dict[str, int]) -> dict[str, Category]:
+    per_cat: dict[str, int] = {}
+    for raw, n in counts.items():
+        cat = vocab.label_map.clean(raw) if vocab.label_map else None
+        if cat is not None:
+            per_cat[cat] = per_cat.get(cat, 0) + n
+    if not per_cat:
+        return vocab.categories
+    med = float(sorted(per_cat.values())[len(per_cat) // 2])
+    out = {}
+    for name, c in vocab.categories.items():
+        n = per_cat.get(name, 0)
+        f = FREQ_FLOOR if n == 0 else min(FREQ_CAP, max(FREQ_FLOOR, (n / med) ** 0.5))
+        out[name] = replace(c, frequency=round(f, 4), hm3dsem_instances=n)
+    return out

@@ -26,7 +26,7 @@ from ovon.sim.navgrid import NavGrid, SceneNav
 
 MAX_SNAP = 0.5  # m: goals farther than this from any navigable cell of the grid are ignored
 _SEED_RADIUS = 3  # cells: window around a goal where the level set is the exact Euclidean distance
-_CACHE_SIZE = 32
+_CACHE_SIZE = 256  # fields per process (a 400x400 field is 0.6 MB); training resets revisit goal sets
 _CACHE: OrderedDict[tuple, DistanceField] = OrderedDict()
 
 
@@ -321,13 +321,19 @@ class DistanceField:
 
 
 def _snap_goals(grid: NavGrid, goals: np.ndarray, max_snap: float) -> np.ndarray:
+    if len(goals) == 0:
+        return np.zeros((0, 3), np.float64)
+    rows, cols = grid.world_to_cell(goals)
+    h, w = grid.navigable.shape
+    inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+    ok = np.zeros(len(goals), bool)
+    ok[inside] = grid.navigable[rows[inside], cols[inside]]
     out = []
-    for p in goals:
-        r, c = grid.world_to_cell(p)
-        if grid.in_bounds(r, c) and grid.navigable[r, c]:
+    for i, p in enumerate(goals):  # goals on navigable cells pass as they are; the rest snap (rare)
+        if ok[i]:
             out.append(np.array(p, dtype=np.float64))
             continue
-        nr, nc = grid.nearest_cell(r, c)
+        nr, nc = grid.nearest_cell(int(rows[i]), int(cols[i]))
         if nr < 0:
             continue
         q = grid.cell_to_world(nr, nc)
@@ -336,22 +342,30 @@ def _snap_goals(grid: NavGrid, goals: np.ndarray, max_snap: float) -> np.ndarray
     return np.asarray(out, dtype=np.float64).reshape(-1, 3)
 
 
+@njit(cache=True)
+def _seed_kernel(seed, gx, gz, grow, gcol, r0, c0, w, ox, oz, cs):  # noqa: ANN001
+    rows, cols = seed.shape
+    for k in range(gx.shape[0]):
+        ra = max(grow[k] - w - r0, 0)
+        rb = min(grow[k] + w + 1 - r0, rows)
+        ca = max(gcol[k] - w - c0, 0)
+        cb = min(gcol[k] + w + 1 - c0, cols)
+        for r in range(ra, rb):
+            z = oz + (float(r + r0) + 0.5) * cs
+            for c in range(ca, cb):
+                x = ox + (float(c + c0) + 0.5) * cs
+                d = math.hypot(z - gz[k], x - gx[k])
+                if d < seed[r, c]:
+                    seed[r, c] = d
+
+
 def _seed(grid: NavGrid, goals: np.ndarray, r0: int, c0: int, shape: tuple[int, int]) -> np.ndarray:
     """Exact Euclidean distance to the nearest goal in a window around each goal (inf elsewhere),
     on the crop starting at (r0, c0)."""
     seed = np.full(shape, np.inf)
-    cs = grid.cell_size
-    w = _SEED_RADIUS
-    for p in goals:
-        r, c = grid.world_to_cell(p)
-        ra, rb = max(r - w - r0, 0), min(r + w + 1 - r0, shape[0])
-        ca, cb = max(c - w - c0, 0), min(c + w + 1 - c0, shape[1])
-        if ra >= rb or ca >= cb:
-            continue
-        zs = grid.origin[1] + (np.arange(ra, rb) + r0 + 0.5) * cs
-        xs = grid.origin[0] + (np.arange(ca, cb) + c0 + 0.5) * cs
-        d = np.hypot(zs[:, None] - p[2], xs[None, :] - p[0])
-        seed[ra:rb, ca:cb] = np.minimum(seed[ra:rb, ca:cb], d)
+    rows, cols = grid.world_to_cell(goals)
+    _seed_kernel(seed, np.ascontiguousarray(goals[:, 0]), np.ascontiguousarray(goals[:, 2]), rows, cols,
+                 int(r0), int(c0), _SEED_RADIUS, float(grid.origin[0]), float(grid.origin[1]), float(grid.cell_size))
     return seed
 
 

@@ -20,8 +20,16 @@ Method (one pass over the triangles for each stage, compiled with numba):
 5. Erosion: `navigable` = free cells whose centre is at least `agent.radius` from the centre of the
    nearest non-free cell (scipy EDT). Cell centres sit on multiples of `cell_size`, so walls at round
    coordinates fall inside a cell rather than on a boundary.
-6. Islands: 4-connected components of `navigable` (4 = the stencil fast marching uses, so an island is
+6. Drivable: the discrete agent (forward steps of `forward_step`, turns of `turn_angle_deg`, no sliding)
+   drifts sideways by up to forward_step * sin(turn / 2) per step along a corridor whose direction is
+   not one of its headings, so a corridor of agent centres narrower than twice that (0.13 m with
+   0.25 m / 30 deg) cannot be driven reliably (measured with the shortest-path oracle on doorways of
+   10 cm of play: ~15% success). Such strips are removed by a morphological opening of the navigable
+   cells with a disk of that diameter; the removed cells are kept in `narrow` for reports.
+7. Islands: 4-connected components of `navigable` (4 = the stencil fast marching uses, so an island is
    exactly the set a distance field can reach). Tiny islands are kept; `random_point` filters them.
+   An island whose median surface lies more than `ELEVATED_M` above the floor (a table or bed top with
+   head room) is "elevated": starts and goal viewpoints never use it.
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ from ovon.sim.los import los_between
 DEFAULT_MAX_SLOPE_DEG = 30.0  # used when NavConfig has no `max_slope_deg`
 MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
 MIN_COVERED_FRACTION = 0.5  # no-hint mode: a floor has a ceiling over most of it; roofs do not
+ELEVATED_M = 0.3  # islands whose median surface is this far above the floor are furniture tops
 _EPS_BARY = 1e-7
 _uid_counter = itertools.count(1)
 
@@ -262,6 +271,8 @@ class NavGrid:
     islands: np.ndarray
     island_area: np.ndarray
     island_radius: np.ndarray
+    island_height: np.ndarray | None = None  # median surface height per island
+    narrow: np.ndarray | None = None  # free, clear of the radius, but in strips too narrow to drive
     uid: int = field(default_factory=lambda: next(_uid_counter))
     _nearest: np.ndarray | None = field(default=None, repr=False)
 
@@ -339,9 +350,22 @@ class NavGrid:
             return np.full(3, np.nan)
         return self.cell_to_world(r, c)
 
+    def elevated(self) -> np.ndarray:
+        """(num_islands,) bool: islands on furniture tops (median surface > ELEVATED_M above the floor)."""
+        if self.island_height is None:
+            return np.zeros(self.num_islands, dtype=bool)
+        return self.island_height > self.height + ELEVATED_M
+
+    def start_islands(self, min_island_radius: float = 0.0) -> np.ndarray:
+        """Ids of the islands where starts and goal viewpoints may lie: radius >= min_island_radius and
+        not elevated (when every big island is elevated, those are used rather than none)."""
+        big = self.island_radius >= min_island_radius
+        ok = np.flatnonzero(big & ~self.elevated())
+        return ok if len(ok) else np.flatnonzero(big)
+
     def random_point(self, rng: np.random.Generator, min_island_radius: float = 0.0) -> np.ndarray:
-        """Uniform navigable point (jittered inside its cell) on an island of radius >= min_island_radius."""
-        ok = np.flatnonzero(self.island_radius >= min_island_radius)
+        """Uniform navigable point (jittered inside its cell) on a start island (`start_islands`)."""
+        ok = self.start_islands(min_island_radius)
         if len(ok) == 0:
             raise ValueError(f"floor {self.floor}: no island with radius >= {min_island_radius} m")
         if len(ok) == len(self.island_radius):
@@ -490,6 +514,52 @@ def _islands(navigable: np.ndarray, origin: np.ndarray, cs: float):
     return islands, cnt * cs * cs, radius
 
 
+def _island_heights(islands: np.ndarray, heights: np.ndarray, n: int) -> np.ndarray:
+    """Median surface height of each island."""
+    out = np.zeros(n)
+    if n == 0:
+        return out
+    rr, cc = np.nonzero(islands >= 0)
+    lab = islands[rr, cc]
+    h = heights[rr, cc].astype(np.float64)
+    order = np.lexsort((h, lab))
+    lab, h = lab[order], h[order]
+    starts = np.searchsorted(lab, np.arange(n))
+    ends = np.searchsorted(lab, np.arange(n), side="right")
+    for i in range(n):
+        seg = h[starts[i] : ends[i]]
+        seg = seg[np.isfinite(seg)]
+        out[i] = float(np.median(seg)) if len(seg) else np.nan
+    return out
+
+
+def min_drivable_width(agent: AgentConfig) -> float:
+    """Narrowest corridor of agent centres the discrete agent drives reliably: twice its sideways drift
+    per step when its heading is half a turn off the corridor (see the module docstring, step 6)."""
+    return 2.0 * agent.forward_step * math.sin(math.radians(agent.turn_angle_deg) / 2.0)
+
+
+def _drivable(free: np.ndarray, cs: float, agent: AgentConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(navigable, narrow): radius erosion, then opening with a disk of diameter `min_drivable_width`."""
+    clearance = ndimage.distance_transform_edt(free) * cs
+    eroded = free & (clearance >= agent.radius - 1e-6)
+    r = min_drivable_width(agent) / 2.0 / cs  # in cells
+    if r < 1.0 or not eroded.any():
+        return eroded, np.zeros_like(eroded)
+    core = ndimage.distance_transform_edt(eroded) > r
+    navigable = eroded & (ndimage.distance_transform_edt(~core) <= r + 1e-9)
+    return navigable, eroded & ~navigable
+
+
+def _grid(floor: int, height: float, origin: np.ndarray, cs: float, free: np.ndarray, heights: np.ndarray,
+          agent: AgentConfig) -> NavGrid:
+    navigable, narrow = _drivable(free, cs, agent)
+    islands, area, radius = _islands(navigable, origin, cs)
+    return NavGrid(floor=floor, height=float(height), origin=origin.copy(), cell_size=cs, navigable=navigable,
+                   free=free, heights=heights, islands=islands, island_area=area, island_radius=radius,
+                   island_height=_island_heights(islands, heights, len(area)), narrow=narrow)
+
+
 def _make_grid(
     floor: int,
     height: float,
@@ -499,7 +569,7 @@ def _make_grid(
     any_h: np.ndarray,
     agent: AgentConfig,
 ) -> NavGrid:
-    """Ledge cut + radius erosion + islands for one floor's per-cell heights."""
+    """Ledge cut + radius erosion + drivable opening + islands for one floor's per-cell heights."""
     free = ~np.isnan(free_h)
     ledge = np.zeros_like(free)
     fh = np.where(free, free_h, 0.0)
@@ -511,22 +581,8 @@ def _make_grid(
         ledge[a] |= jump
         ledge[b] |= jump
     free &= ~ledge
-    clearance = ndimage.distance_transform_edt(free) * cs
-    navigable = free & (clearance >= agent.radius - 1e-6)
-    islands, area, radius = _islands(navigable, origin, cs)
     heights = np.where(np.isnan(free_h), any_h, free_h).astype(np.float32)
-    return NavGrid(
-        floor=floor,
-        height=float(height),
-        origin=origin.copy(),
-        cell_size=cs,
-        navigable=navigable,
-        free=free,
-        heights=heights,
-        islands=islands,
-        island_area=area,
-        island_radius=radius,
-    )
+    return _grid(floor, height, origin, cs, free, heights, agent)
 
 
 def _grid_frame(V: np.ndarray, cs: float) -> tuple[np.ndarray, int, int]:
@@ -576,7 +632,7 @@ def _cache_key(scene: Scene, agent: AgentConfig, nav: NavConfig) -> str:
     h.update(np.asarray(v.shape, dtype=np.int64).tobytes())
     h.update(v.tobytes())
     h.update(f.tobytes())
-    h.update(repr((list(map(float, scene.floor_heights)), agent, nav, "navgrid-v1")).encode())
+    h.update(repr((list(map(float, scene.floor_heights)), agent, nav, "navgrid-v2")).encode())
     return h.hexdigest()
 
 
@@ -597,11 +653,7 @@ def _load(path: Path, agent: AgentConfig) -> list[NavGrid]:
         for i in range(int(z["n"])):
             h, ox, oz, cs = z[f"meta{i}"]
             free, heights = z[f"free{i}"], z[f"heights{i}"]
-            clearance = ndimage.distance_transform_edt(free) * cs
-            navigable = free & (clearance >= agent.radius - 1e-6)
-            origin = np.array([ox, oz])
-            islands, area, radius = _islands(navigable, origin, float(cs))
-            grids.append(NavGrid(i, float(h), origin, float(cs), navigable, free, heights, islands, area, radius))
+            grids.append(_grid(i, float(h), np.array([ox, oz]), float(cs), free, heights, agent))
     return grids
 
 

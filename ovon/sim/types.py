@@ -10,7 +10,7 @@ import numpy as np
 
 @dataclass
 class Frame:
-    rgb: np.ndarray  # (H, W, 3) uint8
+    rgb: np.ndarray | None  # (H, W, 3) uint8; None when the camera skips RGB (camera.rgb = False)
     depth: np.ndarray  # (H, W) float32, metres, z-depth along the optical axis; 0 where nothing was hit
     semantic: np.ndarray  # (H, W) int32 instance ids, 0 = none
 

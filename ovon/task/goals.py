@@ -11,6 +11,7 @@ from ovon.task.tracker import Distractor
 
 def goal_instances(scene: Scene, spec: EpisodeSpec) -> list[ObjectInstance]:
     """Instances of the goal category and its children (or exactly the ids the episode lists)."""
+    scene.require_semantics(f"ObjectNav goals ({spec.goal_category!r})")  # a bare mesh: say what is missing
     if spec.goal_instance_ids:
         wanted = set(spec.goal_instance_ids)
         objs = [o for o in scene.objects if o.id in wanted]

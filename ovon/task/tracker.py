@@ -135,7 +135,8 @@ class EpisodeTracker:
             delta = self.distance - self.prev_distance
             if not math.isfinite(delta):
                 delta = 0.0
-            return -delta + r.dense_slack
+            failed_stop = r.dense_failed_stop if self.called_stop else 0.0
+            return -delta + r.dense_slack + failed_stop
         if r.kind == "sparse":
             collision = r.sparse_collision if self.last_collided else 0.0
             return (r.sparse_success if self.success else 0.0) + r.sparse_slack + collision

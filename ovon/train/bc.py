@@ -22,61 +22,60 @@ import torch
 from ovon.config.base import to_dict
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.checkpoint import atomic_torch_save, seed_everything, set_rng_state
-from ovon.train.common import (
-    build_train_policy,
-    imitation_loss,
-    load_init_policy,
-    load_online,
-    rank_text_table,
-    save_online,
-    set_threads,
-    write_rank_report,
-)
+from ovon.train.batches import features, imitation_loss
+from ovon.train.checkpoint import atomic_torch_save
 from ovon.train.config import TrainConfig, reward_for
-from ovon.train.logging import RunLogger
-from ovon.train.rollout import expert_config
+from ovon.train.run import TrainRun, expert_config
 
 SHARD_FORMAT = "ovon-bc-shard-v1"
 
 
 # ----- recording ----------------------------------------------------------------------------------
 def _record_job(job: dict) -> dict:
-    """Worker: run the expert on a list of (spec, seed) episodes of one scene and write one shard."""
+    """Worker: run the expert on a list of (spec, seed) episodes of one scene and write one shard.
+
+    The env is the training stack (expert labels + frozen encoder), driven by its own labels."""
+    from ovon.env.encode import GOAL, IMAGE
+    from ovon.env.labels import KEY as LABEL
+    from ovon.env.stack import EnvRecipe, build_env
     from ovon.parallel import init_worker
-    from ovon.train.rollout import EnvSlot, SlotConfig
 
     init_worker()
     path = Path(job["path"])
     if path.exists():
         return {"path": str(path), "episodes": -1}
-    slot = EnvSlot(SlotConfig(job["specs"], job["sim"], job["task"], job["encoder"], job["table"],
-                              job["expert"], job["seed"], expert_cfg=job.get("expert_cfg"),
-                              expert_viewpoint_radius=job.get("expert_viewpoint_radius", 0.0)))
+    env = build_env(EnvRecipe(sim=job["sim"], task=job["task"], encoder=job["encoder"], text_table=job["table"],
+                              expert=job["expert"], expert_cfg=job.get("expert_cfg"),
+                              expert_viewpoint_radius=job.get("expert_viewpoint_radius", 0.0),
+                              episodes=job["specs"][:1], sample_episodes=False))
+    cnn = job["encoder"].image == "cnn"
     images: list[Any] = []
     prev, act, ep_of, lengths, goals, goal_text, metrics = [], [], [], [], [], [], []
     try:
         for spec_index, seed in job["items"]:
+            spec = job["specs"][spec_index]
             try:
-                out = slot._start(spec_index, seed)
+                obs, _ = env.reset(seed=seed, options={"episode": spec})
             except ValueError:  # no reachable goal from this floor: skip the episode
                 continue
             e = len(lengths)
-            goals.append(out.goal)
-            goal_text.append(job["specs"][spec_index].goal_category)
-            n, last = 0, -1
-            while not out.done:
-                images.append(out.image)
+            goals.append(obs[GOAL])
+            goal_text.append(spec.goal_category)
+            n, last, done, info = 0, -1, False, {}
+            while not done:
+                label = int(obs[LABEL])
+                images.append({"rgb": obs["rgb"], "depth": obs["depth"]} if cnn else obs[IMAGE])
                 prev.append(last)
-                act.append(out.label)
+                act.append(label)
                 ep_of.append(e)
-                last = out.label
+                last = label
                 n += 1
-                out = slot.step(out.label, auto_reset=False)
+                obs, _, term, trunc, info = env.step(label)
+                done = term or trunc
             lengths.append(n)
-            metrics.append(out.metrics)
+            metrics.append(info["metrics"])
     finally:
-        slot.close()
+        env.close()
     if not lengths:
         return {"path": str(path), "episodes": 0}
     shard: dict[str, Any] = {
@@ -202,49 +201,33 @@ def epoch_permutation(n: int, seed: int, epoch: int) -> torch.Tensor:
 def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | Path, resume: bool = False,
              init: str | None = None) -> dict:
     """Record shards if missing (needs `specs`), then train; returns the last logged metrics."""
-    from ovon.train.common import features
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    info = dist.setup(cfg.device)
-    set_threads(cfg.threads)
-    seed_everything(cfg.seed + 7919 * info.rank)
-    dev = info.device
-    shard_dir = Path(cfg.bc.shards) if cfg.bc.shards else out / "shards"
-    table: dict = {}
-    if not list(shard_dir.glob("shard_*.pt")):
-        if not specs:
-            raise ValueError(f"no BC shards in {shard_dir} and no episodes to record them from (--data/--scenes)")
-        table = rank_text_table(cfg, specs, out, info)
-        if info.is_main:
-            record_shards(cfg, specs, shard_dir, table, progress=cfg.progress)
-        dist.barrier(info)
-    elif specs or cfg.text_cache:
-        table = rank_text_table(cfg, specs or [], out, info)
-    data = load_shards(shard_dir, cfg.policy.context if not init else load_init_policy(init, cfg.encoder).cfg.context)
-    text_dim = int(data.goal.shape[-1])
-    if init:
-        policy = load_init_policy(init, cfg.encoder)
-        cfg = dataclasses.replace(cfg, policy=policy.cfg, encoder=policy.encoder_cfg or cfg.encoder)
-    else:
-        policy = build_train_policy(cfg.policy, cfg.encoder, data.image_dim or cfg.encoder.cnn_dim, text_dim)
-    policy.text_table = table
-    policy.to(dev)
-    model = dist.wrap(policy, info)
-    optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
-    B, W = cfg.bc.batch_chunks, info.world_size
-    n_chunks = len(data.chunks)
-    per_epoch = max(1, n_chunks // (B * W))
-    total = cfg.max_updates if cfg.max_updates > 0 else cfg.bc.epochs * per_epoch
-    start_update, step = 0, 0
-    if resume and (out / "checkpoint.pt").exists():
-        ckpt, mine = load_online(out, info, policy, optimizer)
-        start_update, step = ckpt["update"], ckpt["step"]
-        set_rng_state(mine["rng"])
-    logger = RunLogger(out, total, "bc", info.is_main, cfg.progress, start_update, step)
-    last: dict = {}
+    run = TrainRun(cfg, out_dir, "bc", init=init, resume=resume)
+    cfg, dev, info = run.cfg, run.device, run.info
     try:
-        for update in range(start_update, total):
+        shard_dir = Path(cfg.bc.shards) if cfg.bc.shards else run.out / "shards"
+        if not list(shard_dir.glob("shard_*.pt")):
+            if not specs:
+                raise ValueError(f"no BC shards in {shard_dir} and no episodes to record them from (--data/--scenes)")
+            table = run.text_table(specs)
+            if run.is_main:
+                record_shards(cfg, specs, shard_dir, table, progress=cfg.progress)
+            dist.barrier(info)
+        elif specs or cfg.text_cache:
+            run.text_table(specs or [])
+        data = load_shards(shard_dir, cfg.policy.context)
+        policy = run.build_policy(data.image_dim or cfg.encoder.cnn_dim, int(data.goal.shape[-1]))
+        model = dist.wrap(policy, info)
+        optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
+        B, W = cfg.bc.batch_chunks, info.world_size
+        n_chunks = len(data.chunks)
+        per_epoch = max(1, n_chunks // (B * W))
+        total = cfg.max_updates if cfg.max_updates > 0 else cfg.bc.epochs * per_epoch
+        saved = run.restore(optimizer)
+        if saved is not None:
+            run.restore_rng(saved)
+        run.open_logger(total)
+        last: dict = {}
+        for update in range(run.start_update, total):
             t0 = time.perf_counter()
             epoch, k = divmod(update, per_epoch)
             perm = epoch_permutation(n_chunks, cfg.seed, epoch)
@@ -260,16 +243,16 @@ def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | P
             loss.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)
             optimizer.step()
-            step += int(m.sum()) * W
+            run.step += int(m.sum()) * W
             acc = (logits[m].argmax(-1) == b["action"][m]).float().mean()
             scalars = dist.all_reduce_mean({"loss": loss.item(), "accuracy": acc.item(),
                                             "grad_norm": float(grad_norm)}, info)
-            if (update + 1) % cfg.log_every == 0 or update + 1 == total:
+            if run.due(update + 1, total, cfg.log_every):
                 last = {**scalars, "epoch": float(epoch), "time/update_s": time.perf_counter() - t0}
-                logger.log(update + 1, step, last)
-            if (update + 1) % cfg.checkpoint_every == 0 or update + 1 == total:
-                save_online(out, info, cfg, "bc", policy, optimizer, update + 1, step, {})
-        write_rank_report(out, info, policy, total)
+                run.log(update + 1, last)
+            if run.due(update + 1, total, cfg.checkpoint_every):
+                run.save(update + 1, optimizer, {})
+        run.finish(total)
     finally:
-        logger.close()
+        run.close()
     return last

@@ -123,7 +123,10 @@ class TrainConfig:
     # Bookkeeping.
     seed: int = 0
     device: str = "auto"  # auto = cuda:<local rank> when available, else cpu
-    threads: int = 0  # torch threads in the trainer (0 = leave torch's default)
+    threads: int = 0  # torch threads of the learner's updates (0 = leave torch's default)
+    # torch threads while acting during rollouts: the env workers need the cores meanwhile, and an idle
+    # multi-threaded pool spins and steals their CPU (0 = same as `threads`)
+    rollout_threads: int = 1
     log_every: int = 1  # updates
     checkpoint_every: int = 50  # updates
     keep_checkpoints: int = 3  # numbered policy snapshots kept besides the latest
@@ -169,6 +172,9 @@ def _cpu_small() -> TrainConfig:
         dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=200, buffer_rollouts=300, grad_steps=8,
                             sample_rollouts=4),
         checkpoint_every=50,
+        # One learner thread: on 2 cores a second torch thread only helps while nothing else runs, and
+        # an idle multi-threaded pool spinning next to the env workers slows everything 3-4x.
+        threads=1,
     )
 
 

@@ -1,9 +1,10 @@
 """DAgger: the student's sampled action drives the env, the expert labels every visited state online,
 and the policy is trained with cross-entropy on those labels (baselines.md; upstream: beta = 0).
 
-As upstream, training is on-policy: every update collects `rollout_steps` steps in each env and takes
-one gradient step on those (num_envs x rollout_steps) chunks - no aggregated dataset. With
-`dagger.beta_*` > 0, the expert's own action drives the env with probability beta (classic DAgger).
+Upstream trains on-policy: every update collects `rollout_steps` steps in each env and takes one
+gradient step on those (num_envs x rollout_steps) chunks. `dagger.buffer_rollouts` > 1 aggregates the
+last rollouts into a dataset and `dagger.grad_steps` > 1 reuses it (what makes DAgger learn in minutes
+on a CPU); with `dagger.beta_*` > 0 the expert's own action drives the env with probability beta.
 
     python -m ovon.cli.main train --algo dagger --preset cpu-small --data D --scenes S --out runs/dagger
     torchrun --nproc_per_node 8 -m ovon.cli.main train --algo dagger --preset paper ...
@@ -19,22 +20,9 @@ import torch
 
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.checkpoint import set_rng_state
-from ovon.train.common import (
-    episode_summary,
-    features,
-    imitation_loss,
-    load_online,
-    map_images,
-    num_updates,
-    open_online,
-    save_online,
-    stack_images,
-    write_rank_report,
-)
+from ovon.train.batches import cat_images, episode_summary, features, imitation_loss, map_images, stack_images
 from ovon.train.config import TrainConfig, reward_for
-from ovon.train.logging import RunLogger
-from ovon.train.rollout import Batch
+from ovon.train.run import TrainRun, num_updates
 
 
 def beta_at(cfg: TrainConfig, update: int) -> float:
@@ -48,50 +36,52 @@ def beta_at(cfg: TrainConfig, update: int) -> float:
 def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
                  init: str | None = None) -> dict:
     """Run DAgger; returns the last logged metrics. `init` starts from an IL/RL `policy.pt`."""
-    out = Path(out_dir)
-    cfg, info, envs, batch, policy = open_online(cfg, specs, out, reward_for(cfg, False), label=True, init=init)
-    dev = info.device
-    model = dist.wrap(policy, info)
-    optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
-    n_envs, T = cfg.num_envs, cfg.rollout_steps
-    act_state = policy.init_state(n_envs, dev)
-    prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
-    start_update, step = 0, 0
-    buffer: list[tuple] = []  # aggregated labelled rollouts (cfg.dagger.buffer_rollouts most recent)
-    if resume and (out / "checkpoint.pt").exists():
-        ckpt, mine = load_online(out, info, policy, optimizer)
-        start_update, step = ckpt["update"], ckpt["step"]
-        act_state, prev_action = mine["act_state"], mine["prev_action"].to(dev)
-        buffer = list(mine.get("buffer", []))
-        batch = envs.set_state(mine["env"])
-        set_rng_state(mine["rng"])
-    total = num_updates(cfg, info.world_size)
-    logger = RunLogger(out, total, "dagger", info.is_main, cfg.progress, start_update, step)
-    last: dict = {}
+    run = TrainRun(cfg, out_dir, "dagger", init=init, resume=resume)
+    cfg, dev = run.cfg, run.device
     try:
-        for update in range(start_update, total):
+        envs, batch = run.open_envs(specs, reward_for(cfg, False), label=True)
+        policy = run.build_policy(int(batch.image.shape[-1]) if isinstance(batch.image, torch.Tensor) else 0,
+                                  int(batch.goal.shape[-1]))
+        model = dist.wrap(policy, run.info)
+        optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
+        n_envs, T = cfg.num_envs, cfg.rollout_steps
+        act_state = policy.init_state(n_envs, dev)
+        prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
+        buffer: list[tuple] = []  # aggregated labelled rollouts (cfg.dagger.buffer_rollouts most recent)
+        saved = run.restore(optimizer)
+        if saved is not None:
+            act_state, prev_action = saved["act_state"], saved["prev_action"].to(dev)
+            buffer = list(saved.get("buffer", []))
+            batch = envs.set_state(saved["env"])
+            run.restore_rng(saved)
+        total = num_updates(cfg, run.info.world_size)
+        run.open_logger(total)
+        last: dict = {}
+        for update in range(run.start_update, total):
             t0 = time.perf_counter()
             beta = beta_at(cfg, update)
             images, goals, prevs, starts, labels, finished = [], [], [], [], [], []
             # ---- rollout: the student acts, the expert labels -------------------------------------
             policy.eval()
-            for _ in range(T):
-                b = batch
-                with torch.no_grad():
-                    obs = policy.make_obs(features(policy, map_images(b.image, lambda x: x.to(dev))), b.goal.to(dev))
-                    logits, _, act_state = policy.act_step(obs, prev_action, act_state, b.first.to(dev))
-                    action = policy.distribution(logits).sample()
-                    if beta > 0:
-                        use_expert = torch.rand(n_envs, device=dev) < beta
-                        action = torch.where(use_expert, b.label.to(dev), action)
-                images.append(b.image)
-                goals.append(b.goal)
-                prevs.append(prev_action.cpu())
-                starts.append(b.first)
-                labels.append(b.label)
-                batch: Batch = envs.step(action.cpu())
-                prev_action = torch.where(batch.first.to(dev), torch.full_like(action, -1), action)
-                finished += batch.metrics
+            with run.acting():
+                for _ in range(T):
+                    b = batch
+                    with torch.no_grad():
+                        obs = policy.make_obs(features(policy, map_images(b.image, lambda x: x.to(dev))),
+                                              b.goal.to(dev))
+                        logits, _, act_state = policy.act_step(obs, prev_action, act_state, b.first.to(dev))
+                        action = policy.distribution(logits).sample()
+                        if beta > 0:
+                            use_expert = torch.rand(n_envs, device=dev) < beta
+                            action = torch.where(use_expert, b.label.to(dev), action)
+                    images.append(b.image)
+                    goals.append(b.goal)
+                    prevs.append(prev_action.cpu())
+                    starts.append(b.first)
+                    labels.append(b.label)
+                    batch = envs.step(action.cpu())
+                    prev_action = torch.where(batch.first.to(dev), torch.full_like(action, -1), action)
+                    finished += batch.metrics
             t1 = time.perf_counter()
             # ---- learn: cross-entropy on the expert's labels over (num_envs, T) chunks -----------------
             buffer.append((_compact(stack_images(images, 1)), torch.stack(goals, 1), torch.stack(prevs, 1),
@@ -103,7 +93,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 picks = [len(buffer) - 1]  # the newest rollout, plus random older ones
                 older = torch.randperm(len(buffer) - 1)[: cfg.dagger.sample_rollouts - 1].tolist()
                 parts = [buffer[i] for i in picks + older]
-                img = map_images(_cat([p[0] for p in parts]), lambda x: x.to(dev))  # (N, T, ...)
+                img = map_images(cat_images([p[0] for p in parts]), lambda x: x.to(dev))  # (N, T, ...)
                 obs = policy.make_obs(features(policy, img), torch.cat([p[1] for p in parts]).to(dev))
                 logits, values = model(obs, torch.cat([p[2] for p in parts]).to(dev),
                                        torch.cat([p[3] for p in parts]).to(dev))
@@ -117,23 +107,21 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 losses.append(loss.item())
                 accs.append((logits[valid].argmax(-1) == target[valid]).float().mean().item())
             t2 = time.perf_counter()
-            step += n_envs * T * info.world_size
+            run.step += n_envs * T * run.info.world_size
             scalars = dist.all_reduce_mean({"loss": float(np.mean(losses)), "accuracy": float(np.mean(accs)),
                                             "grad_norm": float(grad_norm), "time/rollout_s": t1 - t0,
-                                            "time/learn_s": t2 - t1}, info)
-            eps = [m for part in dist.gather_objects(finished, info) for m in part]
-            if (update + 1) % cfg.log_every == 0 or update + 1 == total:
+                                            "time/learn_s": t2 - t1}, run.info)
+            eps = [m for part in dist.gather_objects(finished, run.info) for m in part]
+            if run.due(update + 1, total, cfg.log_every):
                 last = {**scalars, **episode_summary(eps), "beta": beta,
-                        "steps_per_s": n_envs * T * info.world_size / max(t2 - t0, 1e-9)}
-                logger.log(update + 1, step, last)
-            if (update + 1) % cfg.checkpoint_every == 0 or update + 1 == total:
-                save_online(out, info, cfg, "dagger", policy, optimizer, update + 1, step,
-                            {"env": envs.get_state(), "act_state": act_state, "prev_action": prev_action.cpu(),
-                             "buffer": buffer})
-        write_rank_report(out, info, policy, total)
+                        "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
+                run.log(update + 1, last)
+            if run.due(update + 1, total, cfg.checkpoint_every):
+                run.save(update + 1, optimizer, {"env": envs.get_state(), "act_state": act_state,
+                                                 "prev_action": prev_action.cpu(), "buffer": buffer})
+        run.finish(total)
     finally:
-        logger.close()
-        envs.close()
+        run.close()
     return last
 
 
@@ -141,10 +129,3 @@ def _compact(images: object) -> object:
     """Frozen-encoder embeddings are kept in float16 in the buffer (half the memory of a long DAgger
     dataset); `features` turns them back into float32."""
     return images.half() if isinstance(images, torch.Tensor) and images.is_floating_point() else images
-
-
-def _cat(items: list) -> object:
-    """Concatenate rollouts along the env dimension (tensors or dicts of tensors for raw frames)."""
-    if isinstance(items[0], torch.Tensor):
-        return torch.cat(items)
-    return {k: torch.cat([x[k] for x in items]) for k in items[0]}

@@ -21,21 +21,9 @@ import torch
 
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.checkpoint import set_rng_state
-from ovon.train.common import (
-    episode_summary,
-    features,
-    load_online,
-    map_images,
-    num_updates,
-    open_online,
-    save_online,
-    stack_images,
-    write_rank_report,
-)
+from ovon.train.batches import episode_summary, features, map_images, stack_images
 from ovon.train.config import FinetuneConfig, TrainConfig, reward_for
-from ovon.train.logging import RunLogger
-from ovon.train.rollout import Batch
+from ovon.train.run import TrainRun, num_updates
 
 
 def finetune_lrs(ft: FinetuneConfig, update: int) -> tuple[float, float]:
@@ -69,44 +57,43 @@ def _index_state(state, idx: torch.Tensor):
 def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
               init: str | None = None) -> dict:
     """Run PPO (from scratch, or fine-tuning `init`); returns the last logged metrics."""
-    out = Path(out_dir)
     finetune = init is not None
-    cfg, info, envs, batch, policy = open_online(cfg, specs, out, reward_for(cfg, finetune), label=False, init=init)
-    dev = info.device
-    pc = cfg.ppo
-    if finetune:
-        if cfg.finetune.reinit_critic:
-            policy.reinit_critic()
-        groups = policy.parameter_groups()
-        if cfg.finetune.freeze_prev_action:
-            for p in groups["prev_action"]:
-                p.requires_grad_(False)
-        critic_lr, actor_lr = finetune_lrs(cfg.finetune, 0)
-        param_groups = [{"params": groups["critic"], "lr": critic_lr, "name": "critic"},
-                        {"params": groups["actor"], "lr": actor_lr, "name": "actor"}]
-        if not cfg.finetune.freeze_prev_action and groups["prev_action"]:
-            param_groups.append({"params": groups["prev_action"], "lr": actor_lr, "name": "prev_action"})
-        optimizer = torch.optim.Adam(param_groups, eps=cfg.adam_eps)
-    else:
-        optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
-    model = dist.wrap(policy, info)
-    n_envs, T = cfg.num_envs, cfg.rollout_steps
-    act_state = policy.init_state(n_envs, dev)
-    prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
-    start_update, step = 0, 0
-    if resume and (out / "checkpoint.pt").exists():
-        ckpt, mine = load_online(out, info, policy, optimizer)
-        start_update, step = ckpt["update"], ckpt["step"]
-        act_state, prev_action = mine["act_state"], mine["prev_action"].to(dev)
-        batch = envs.set_state(mine["env"])
-        set_rng_state(mine["rng"])
-    total = num_updates(cfg, info.world_size)
-    logger = RunLogger(out, total, "ppo-finetune" if finetune else "ppo", info.is_main, cfg.progress,
-                       start_update, step)
-    trainable = [p for p in policy.parameters() if p.requires_grad]
-    last: dict = {}
+    algo = "ppo-finetune" if finetune else "ppo"
+    run = TrainRun(cfg, out_dir, algo, init=init, resume=resume)
+    cfg, dev, pc = run.cfg, run.device, run.cfg.ppo
     try:
-        for update in range(start_update, total):
+        envs, batch = run.open_envs(specs, reward_for(cfg, finetune), label=False)
+        policy = run.build_policy(int(batch.image.shape[-1]) if isinstance(batch.image, torch.Tensor) else 0,
+                                  int(batch.goal.shape[-1]))
+        if finetune:
+            if cfg.finetune.reinit_critic:
+                policy.reinit_critic()
+            groups = policy.parameter_groups()
+            if cfg.finetune.freeze_prev_action:
+                for p in groups["prev_action"]:
+                    p.requires_grad_(False)
+            critic_lr, actor_lr = finetune_lrs(cfg.finetune, 0)
+            param_groups = [{"params": groups["critic"], "lr": critic_lr, "name": "critic"},
+                            {"params": groups["actor"], "lr": actor_lr, "name": "actor"}]
+            if not cfg.finetune.freeze_prev_action and groups["prev_action"]:
+                param_groups.append({"params": groups["prev_action"], "lr": actor_lr, "name": "prev_action"})
+            optimizer = torch.optim.Adam(param_groups, eps=cfg.adam_eps)
+        else:
+            optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
+        model = dist.wrap(policy, run.info)
+        n_envs, T = cfg.num_envs, cfg.rollout_steps
+        act_state = policy.init_state(n_envs, dev)
+        prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
+        saved = run.restore(optimizer)
+        if saved is not None:
+            act_state, prev_action = saved["act_state"], saved["prev_action"].to(dev)
+            batch = envs.set_state(saved["env"])
+            run.restore_rng(saved)
+        total = num_updates(cfg, run.info.world_size)
+        run.open_logger(total)
+        trainable = [p for p in policy.parameters() if p.requires_grad]
+        last: dict = {}
+        for update in range(run.start_update, total):
             t0 = time.perf_counter()
             if finetune:
                 lrs = finetune_lrs(cfg.finetune, update)
@@ -116,24 +103,26 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             images, goals, prevs, starts, actions, rewards, dones, finished = [], [], [], [], [], [], [], []
             # ---- rollout ----------------------------------------------------------------------
             policy.eval()
-            for t in range(T + 1):
-                b = batch
-                images.append(b.image)
-                goals.append(b.goal)
-                prevs.append(prev_action.cpu())
-                starts.append(b.first)
-                if t == T:  # the bootstrap observation: value only, no action
-                    break
-                with torch.no_grad():
-                    obs = policy.make_obs(features(policy, map_images(b.image, lambda x: x.to(dev))), b.goal.to(dev))
-                    logits, _, act_state = policy.act_step(obs, prev_action, act_state, b.first.to(dev))
-                    action = policy.distribution(logits).sample()
-                actions.append(action.cpu())
-                batch: Batch = envs.step(action.cpu())
-                rewards.append(batch.reward)
-                dones.append(batch.done)
-                prev_action = torch.where(batch.first.to(dev), torch.full_like(action, -1), action)
-                finished += batch.metrics
+            with run.acting():
+                for t in range(T + 1):
+                    b = batch
+                    images.append(b.image)
+                    goals.append(b.goal)
+                    prevs.append(prev_action.cpu())
+                    starts.append(b.first)
+                    if t == T:  # the bootstrap observation: value only, no action
+                        break
+                    with torch.no_grad():
+                        obs = policy.make_obs(features(policy, map_images(b.image, lambda x: x.to(dev))),
+                                              b.goal.to(dev))
+                        logits, _, act_state = policy.act_step(obs, prev_action, act_state, b.first.to(dev))
+                        action = policy.distribution(logits).sample()
+                    actions.append(action.cpu())
+                    batch = envs.step(action.cpu())
+                    rewards.append(batch.reward)
+                    dones.append(batch.done)
+                    prev_action = torch.where(batch.first.to(dev), torch.full_like(action, -1), action)
+                    finished += batch.metrics
             t1 = time.perf_counter()
             # ---- advantages (GAE) from one forward over the chunk --------------------------------
             img = map_images(stack_images(images, 1), lambda x: x.to(dev))  # (N, T+1, ...)
@@ -188,22 +177,21 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                         stats[k].append(val.item())
                     stats["grad_norm"].append(float(gn))
             t2 = time.perf_counter()
-            step += n_envs * T * info.world_size
+            run.step += n_envs * T * run.info.world_size
             scalars = {k: sum(v) / len(v) for k, v in stats.items() if v}
             scalars.update({"reward/mean": rew.mean().item(), "time/rollout_s": t1 - t0, "time/learn_s": t2 - t1})
             for g in optimizer.param_groups:
                 scalars[f"lr/{g.get('name', 'all')}"] = g["lr"]
-            scalars = dist.all_reduce_mean(scalars, info)
-            eps = [m for part in dist.gather_objects(finished, info) for m in part]
-            if (update + 1) % cfg.log_every == 0 or update + 1 == total:
+            scalars = dist.all_reduce_mean(scalars, run.info)
+            eps = [m for part in dist.gather_objects(finished, run.info) for m in part]
+            if run.due(update + 1, total, cfg.log_every):
                 last = {**scalars, **episode_summary(eps),
-                        "steps_per_s": n_envs * T * info.world_size / max(t2 - t0, 1e-9)}
-                logger.log(update + 1, step, last)
-            if (update + 1) % cfg.checkpoint_every == 0 or update + 1 == total:
-                save_online(out, info, cfg, "ppo-finetune" if finetune else "ppo", policy, optimizer, update + 1,
-                            step, {"env": envs.get_state(), "act_state": act_state, "prev_action": prev_action.cpu()})
-        write_rank_report(out, info, policy, total)
+                        "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
+                run.log(update + 1, last)
+            if run.due(update + 1, total, cfg.checkpoint_every):
+                run.save(update + 1, optimizer, {"env": envs.get_state(), "act_state": act_state,
+                                                 "prev_action": prev_action.cpu()})
+        run.finish(total)
     finally:
-        logger.close()
-        envs.close()
+        run.close()
     return last

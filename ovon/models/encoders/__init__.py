@@ -6,6 +6,10 @@ Image: "oracle-vl" (oracle perception, default, no weights), "siglip" (paper, lo
 
 from __future__ import annotations
 
+from typing import Any
+
+import numpy as np
+
 from ovon.models.config import EncoderConfig
 from ovon.models.encoders.base import (
     CachedTextEncoder,
@@ -14,6 +18,7 @@ from ovon.models.encoders.base import (
     ModelNotAvailableError,
     TextEncoder,
 )
+from ovon.models.encoders.table import TableTextEncoder
 
 IMAGE_ENCODERS = ("oracle-vl", "siglip", "cnn")
 TEXT_ENCODERS = ("minilm-text", "siglip-text")
@@ -64,6 +69,29 @@ def make_image_encoder(cfg: EncoderConfig | None = None, text_encoder: TextEncod
     raise ValueError(f"unknown image encoder {cfg.image!r}; valid: {list(IMAGE_ENCODERS)}")
 
 
+def encode_observation(encoder: ImageEncoder, obs: dict, semantic: Any = None) -> np.ndarray:
+    """One observation -> (dim,) float32 with a frozen encoder: the ONE place that decides which inputs
+    each encoder reads (used by the env's encoding wrapper in training and by the policy agent).
+
+    `semantic` (H, W) instance ids is the privileged frame, needed by the oracle encoder only."""
+    batch: dict[str, Any] = {"depth": np.asarray(obs["depth"])[None],
+                             "collided": np.array([int(obs.get("collided", 0))])}
+    if "rgb" in obs:
+        batch["rgb"] = np.asarray(obs["rgb"])[None]
+    if semantic is not None:
+        batch["semantic"] = np.asarray(semantic)[None]
+    return encoder.encode(batch)[0].numpy()
+
+
+def image_encoder_inputs(cfg: EncoderConfig) -> frozenset[str]:
+    """Which frames the image encoder reads: the env skips rendering RGB when nothing else needs it."""
+    if cfg.image == "oracle-vl":
+        return frozenset({"semantic", "depth"})
+    if cfg.image == "cnn":
+        return frozenset({"rgb", "depth"} if cfg.cnn_depth else {"rgb"})
+    return frozenset({"rgb"})
+
+
 def image_encoder_dim(cfg: EncoderConfig, text_dim: int = 384) -> int | None:
     """Output size without building the encoder (None for SigLIP: read it from the model)."""
     if cfg.image == "oracle-vl":
@@ -82,8 +110,11 @@ __all__ = [
     "ImageEncoder",
     "ModelNotAvailableError",
     "TEXT_ENCODERS",
+    "TableTextEncoder",
     "TextEncoder",
+    "encode_observation",
     "image_encoder_dim",
+    "image_encoder_inputs",
     "make_image_encoder",
     "make_text_encoder",
 ]

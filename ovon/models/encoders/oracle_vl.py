@@ -127,16 +127,17 @@ class OracleVLEncoder:
         lut, emb = self._mapping(row)
         h, w = semantic.shape
         cell, pixels = self._cell_index(h, w)
-        sem = semantic.astype(np.int64, copy=False).ravel()
-        sem = np.where((sem >= 0) & (sem < lut.size), sem, 0)
-        cats_per_pixel = lut[sem]
-        known = cats_per_pixel >= 0
-        if not known.any():
+        size, g2 = lut.size, self.grid * self.grid
+        sem = semantic.astype(np.int64).ravel()
+        sem[(sem < 0) | (sem >= size)] = 0
+        # pixels per (cell, instance id) in one bincount: ids are small integers, a sort is not needed
+        per_cell = np.bincount(cell * size + sem, minlength=g2 * size).reshape(g2, size)
+        ids = np.flatnonzero((per_cell.sum(0) > 0) & (lut >= 0))  # visible known instances, sorted
+        if not ids.size:
             return np.zeros(self.parts * self.text_dim, dtype=np.float32)
-        ids, inv = np.unique(sem[known], return_inverse=True)
         n = ids.size
-        counts = np.bincount(cell[known] * n + inv, minlength=self.grid * self.grid * n)
-        frac = counts.reshape(self.grid * self.grid, n) / pixels[:, None]
+        counts = per_cell[:, ids]
+        frac = counts / pixels[:, None]
         vecs = emb[lut[ids]].astype(np.float64)
         if self.dropout > 0.0:
             keep = self.rng.random(n) >= self.dropout
@@ -149,7 +150,7 @@ class OracleVLEncoder:
         cells = frac @ vecs  # (cells, text_dim)
         parts = [cells]
         if self.include_global:
-            glob = (counts.reshape(self.grid * self.grid, n).sum(0) / (h * w)) @ vecs
+            glob = (counts.sum(0) / (h * w)) @ vecs
             parts.insert(0, glob[None])
         return np.concatenate(parts, 0).astype(np.float32).ravel()
 

@@ -28,6 +28,7 @@ from ovon.sim.render.texture import (
 from ovon.sim.types import Frame
 
 _MODES = {"face": 0, "vertex": 1, "texture": 2}
+_DEPTH_ONLY = 3
 _NEAR = np.float32(cam.NEAR)
 _FAR = np.float32(cam.FAR)
 
@@ -52,7 +53,8 @@ class EmbreeRenderer:
         mesh = scene.mesh
         self._faces = np.ascontiguousarray(mesh.faces, dtype=np.int32)
         self._vis: VisualSource = visual_source(mesh)
-        self._mode = _MODES[self._vis.mode]
+        self.rgb = bool(getattr(camera, "rgb", True))  # False: depth and ids only (no colour lookups)
+        self._mode = _MODES[self._vis.mode] if self.rgb else _DEPTH_ONLY
         # Unused inputs are passed as tiny dummies so numba compiles one specialisation.
         self._face_rgb = _or(self._vis.face_rgb, np.zeros((1, 3), np.uint8))
         self._vert_rgb = _or(self._vis.vertex_rgb, np.zeros((1, 3), np.uint8))
@@ -86,7 +88,7 @@ class EmbreeRenderer:
         self._origins += np.asarray(eye, dtype=np.float32)
         hit = self._scene.run(self._origins, self._dirs, output=1)
         n = self.width * self.height
-        rgb = np.empty((n, 3), np.uint8)
+        rgb = np.empty((n if self.rgb else 1, 3), np.uint8)
         depth = np.empty(n, np.float32)
         sem = np.empty(n, np.int32)
         _shade(
@@ -100,7 +102,8 @@ class EmbreeRenderer:
             self._sem_faces, self._face_ids, self._sem_uvs, self._id_tex, sem,
         )  # fmt: skip
         shape = (self.height, self.width)
-        return Frame(rgb=rgb.reshape(*shape, 3), depth=depth.reshape(shape), semantic=sem.reshape(shape))
+        rgb_out = rgb.reshape(*shape, 3) if self.rgb else None
+        return Frame(rgb=rgb_out, depth=depth.reshape(shape), semantic=sem.reshape(shape))
 
     def close(self) -> None:
         self._scene = None  # type: ignore[assignment]
@@ -120,11 +123,15 @@ def _shade(prim, bu, bv, tfar, zfac, mode, faces, shade, face_rgb, vert_rgb, uvs
         z = tfar[k] * zfac[k] + _NEAR
         if f < 0 or z > _FAR:
             depth[k] = 0.0
+            if mode == _DEPTH_ONLY:
+                continue
             rgb[k, 0] = 0
             rgb[k, 1] = 0
             rgb[k, 2] = 0
             continue
         depth[k] = z
+        if mode == _DEPTH_ONLY:
+            continue
         u = bu[k]
         v = bv[k]
         w = 1.0 - u - v

@@ -104,10 +104,13 @@ flat in int v_id;
 uniform isampler2D u_ids;
 in vec2 v_suv;
 #endif
-#ifdef VISUAL
+#if defined(VISUAL) && (defined(VIS_TEX) || defined(VIS_COL))
 layout(location = 0) out vec4 f_color;
 layout(location = 1) out float f_depth;
 #define ID_LOC 2
+#elif defined(VISUAL)
+layout(location = 0) out float f_depth;
+#define ID_LOC 1
 #else
 #define ID_LOC 0
 #endif
@@ -157,19 +160,24 @@ class GLRenderer:
         self._proj = cam.projection_matrix(self.width, self.height, self.hfov_deg)
         size = (self.width, self.height)
 
-        vis = visual_source(scene.mesh)
+        # Without RGB (camera.rgb = False: no consumer reads it) the colour attribute, texture lookup,
+        # attachment and read-back are all skipped; depth and ids stay one pass.
+        self.rgb = bool(getattr(camera, "rgb", True))
+        vis = visual_source(scene.mesh) if self.rgb else None
         sem = semantic_source(scene.semantic_source, scene.semantic_colors)
         self._separate = not same_geometry(scene.mesh, scene.semantic_mesh)
         sem_define = "SEM_TEX" if sem.mode == "texture" else "SEM_FACE"
-        vis_defines = ["VISUAL", "VIS_TEX" if vis.mode == "texture" else "VIS_COL"]
+        vis_defines = ["VISUAL"] + ([] if vis is None else ["VIS_TEX" if vis.mode == "texture" else "VIS_COL"])
         if not self._separate:
             vis_defines.append(sem_define)  # same triangles: ids in the same single pass
         self._vis_prog, self._vis_vao, self._vis_tex = self._build(scene.mesh, vis_defines, vis, sem)
 
-        self._color = self._keep(ctx.renderbuffer(size, components=4, dtype="f1"))
         self._zlin = self._keep(ctx.renderbuffer(size, components=1, dtype="f4"))
         self._ids = self._keep(ctx.renderbuffer(size, components=1, dtype="i4"))
-        attach = [self._color, self._zlin] + ([] if self._separate else [self._ids])
+        attach = [self._zlin] + ([] if self._separate else [self._ids])
+        if self.rgb:
+            self._color = self._keep(ctx.renderbuffer(size, components=4, dtype="f1"))
+            attach.insert(0, self._color)
         self._fbo = self._keep(
             ctx.framebuffer(color_attachments=attach, depth_attachment=self._keep(ctx.depth_renderbuffer(size)))
         )
@@ -256,13 +264,17 @@ class GLRenderer:
             self._sem_vao.render()
 
         h, w = self.height, self.width
-        rgb = np.empty((h, w, 3), np.uint8)
+        rgb = None
+        first = 0
+        if self.rgb:
+            rgb = np.empty((h, w, 3), np.uint8)
+            self._fbo.read_into(rgb, components=3, attachment=0, dtype="f1")
+            first = 1
         depth = np.empty((h, w), np.float32)
         sem = np.empty((h, w), np.int32)
-        self._fbo.read_into(rgb, components=3, attachment=0, dtype="f1")
-        self._fbo.read_into(depth, components=1, attachment=1, dtype="f4")
+        self._fbo.read_into(depth, components=1, attachment=first, dtype="f4")
         sem_fbo = self._sem_fbo if self._separate else self._fbo
-        sem_fbo.read_into(sem, components=1, attachment=0 if self._separate else 2, dtype="i4")
+        sem_fbo.read_into(sem, components=1, attachment=0 if self._separate else first + 1, dtype="i4")
         return Frame(rgb=rgb, depth=depth, semantic=sem)
 
     def close(self) -> None:

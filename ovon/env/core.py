@@ -1,8 +1,10 @@
 """The Gymnasium environment: `gymnasium.make("ovon/ObjectNav-v0", scene=..., goal="couch")`.
 
-Observations are what a real robot has (RGB, depth, odometry, goal text); the semantic frame is only
-added with `privileged=True`. Experts and oracles reach ground truth through `env.unwrapped.privileged()`,
-an explicit call that a non-oracle agent has no reason to make.
+Observations are what a real robot has (RGB, depth, odometry, goal text, a bump flag) and `info` holds
+only the episode id (plus the episode's metrics once it has ended): nothing an agent could cheat with.
+Ground truth (true pose, semantic frame, goal field, map) is reachable through ONE explicit channel,
+`env.unwrapped.privileged()`, which the `PrivilegedObservation` wrapper (ovon.env.privileged) puts into
+the observation of oracle agents, experts and oracle encoders.
 """
 
 from __future__ import annotations
@@ -22,9 +24,9 @@ from ovon.scenes.model import Scene
 from ovon.sim.agent import STOP, Kinematics, Odometry
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState, Frame
-from ovon.sim.world import World, build_world
+from ovon.sim.world import World, acquire_world
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
-from ovon.task.goals import distractors, goal_instances, points_near_objects
+from ovon.task.setup import prepare_episode
 from ovon.task.tracker import EpisodeTracker
 
 GOAL_CHARSET = string.ascii_letters + string.digits + " -_'/&().,"
@@ -34,15 +36,18 @@ ODOMETRY_LIMIT_M = 1000.0  # bound of the odometry Box (any building fits; check
 
 @dataclass
 class Privileged:
-    """Ground truth for experts, oracles, dataset tools and failure analysis."""
+    """Ground truth for experts, oracles, dataset tools and failure analysis (never for a real agent)."""
 
-    state: AgentState
+    state: AgentState  # true pose
     grid: object  # NavGrid of the episode's floor
     goal_field: object  # DistanceField to all goal viewpoints
     viewpoints: list[GoalViewpoint]
     goal_ids: frozenset[int]
-    frame: Frame
-    world: World
+    frame: Frame  # the rendered frame, with the semantic instance ids
+    world: World  # scene (objects and categories), navigation, renderer
+    distance_to_goal: float = math.nan  # geodesic distance of the true pose to the nearest viewpoint
+    sim: SimConfig | None = None  # the embodiment and camera this episode runs with
+    task: TaskConfig | None = None  # success radius, step limit
 
 
 class ObjectNavEnv(gym.Env):
@@ -56,7 +61,6 @@ class ObjectNavEnv(gym.Env):
         sim: SimConfig | None = None,
         task: TaskConfig | None = None,
         overrides: list[str] | tuple[str, ...] = (),
-        privileged: bool = False,
         start: tuple[float, float, float, float] | None = None,
         render_mode: str | None = "rgb_array",
     ):
@@ -69,7 +73,6 @@ class ObjectNavEnv(gym.Env):
         if scene is None and not episodes:
             raise ValueError("ObjectNavEnv needs scene=PATH_OR_ID (+ goal=CATEGORY) or episodes=[EpisodeSpec]")
         self.sim_cfg, self.task_cfg = sim, task
-        self.privileged_obs = privileged
         self.render_mode = render_mode
         # A `Scene` object is kept here and looked up by its id (EpisodeSpec.scene is a string).
         self._scene_obj = scene if isinstance(scene, Scene) else None
@@ -81,23 +84,7 @@ class ObjectNavEnv(gym.Env):
         self._actuation = ActuationNoise.from_name(sim.noise.actuation, sim.noise.actuation_multiplier)
         odo = OdometryNoise(sim.noise.odometry_position_m, sim.noise.odometry_heading_deg)
         self._odometry = Odometry(odo if sim.noise.odometry else None)
-        cam = sim.camera
-        obs = {
-            "rgb": spaces.Box(0, 255, (cam.height, cam.width, 3), np.uint8),
-            "depth": spaces.Box(0.0, cam.max_depth, (cam.height, cam.width), np.float32),
-            "odometry": spaces.Box(
-                np.array([-ODOMETRY_LIMIT_M, -ODOMETRY_LIMIT_M, -math.pi], np.float32),
-                np.array([ODOMETRY_LIMIT_M, ODOMETRY_LIMIT_M, math.pi], np.float32),
-                (3,),
-                np.float32,
-            ),
-            "goal": spaces.Text(MAX_GOAL_LEN, min_length=1, charset=GOAL_CHARSET),
-            # 1 when the step that led here was blocked (a bump sensor; task.md reports it each step)
-            "collided": spaces.Discrete(2),
-        }
-        if privileged:
-            obs["semantic"] = spaces.Box(0, np.iinfo(np.int32).max, (cam.height, cam.width), np.int32)
-        self.observation_space = spaces.Dict(obs)
+        self.observation_space = spaces.Dict(observation_spaces(sim))
         self.action_space = spaces.Discrete(6)
         self.spec_episode: EpisodeSpec | None = None
 
@@ -107,7 +94,7 @@ class ObjectNavEnv(gym.Env):
             if self._world is not None:
                 self._world.close()
             obj = self._scene_obj
-            self._world = build_world(obj if obj is not None and obj.scene_id == scene else scene, self.sim_cfg)
+            self._world = acquire_world(obj if obj is not None and obj.scene_id == scene else scene, self.sim_cfg)
         return self._world
 
     def _next_spec(self, options: dict | None) -> EpisodeSpec:
@@ -119,7 +106,7 @@ class ObjectNavEnv(gym.Env):
             return spec
         if self._goal_arg is None:
             raise ValueError("no goal: pass goal=CATEGORY or an episode in reset(options={'episode': ...})")
-        start = None if self._start_arg is None else self._start_arg
+        start = self._start_arg
         return EpisodeSpec(
             episode_id="adhoc",
             scene=str(self._scene_arg),
@@ -134,62 +121,15 @@ class ObjectNavEnv(gym.Env):
         if len(spec.goal_category) > MAX_GOAL_LEN:
             raise ValueError(f"goal text longer than {MAX_GOAL_LEN} characters: {spec.goal_category!r}")
         world = self._world_for(spec.scene)
-        objs = goal_instances(world.scene, spec)
-        rng = self.np_random
-        if spec.start_position is not None:
-            start_pos = np.asarray(spec.start_position, dtype=np.float64)
-            grids = [world.nav.grid_for(start_pos)]
-        else:
-            # Random start: on the floor of a random viewpoint / goal object (a seeded choice).
-            start_pos = None
-            anchors = [v.position for v in spec.viewpoints] or [o.aabb_min for o in objs]
-            order = rng.permutation(len(anchors))
-            grids = []
-            for i in order:
-                g = world.nav.grid_for(anchors[int(i)])
-                if all(g is not h for h in grids):
-                    grids.append(g)
-        grid, points = grids[0], np.zeros((0, 3))
-        if spec.viewpoints:
-            viewpoints = spec.viewpoints
-            points = np.stack([v.position for v in viewpoints])
-        else:
-            for grid in grids:
-                points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
-                if len(points):
-                    break
-            if len(points) == 0:
-                raise ValueError(f"no navigable point within 1 m of any {spec.goal_category!r} on its floor")
-            viewpoints = [GoalViewpoint(p, 0.0) for p in points]
-        from ovon.sim.geodesic import distance_field
-
-        field = distance_field(grid, points)
-        if start_pos is None:
-            start_pos = self._random_reachable_start(grid, field, rng)
-        yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
-        self._state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
-        self._grid, self._field, self._viewpoints = grid, field, viewpoints
-        self._kin = Kinematics(grid, self.sim_cfg.agent, self._actuation)
-        goal_ids = frozenset(o.id for o in objs)
-        self._tracker = EpisodeTracker(
-            distance_fn=field.distance,
-            goal_ids=goal_ids,
-            cfg=self.task_cfg,
-            distractors=distractors(world.scene, spec.goal_categories),
-        )
+        setup = prepare_episode(world, spec, self.np_random, self.task_cfg)
+        self._state, self._grid, self._field = setup.state, setup.grid, setup.goal_field
+        self._viewpoints, self._tracker = setup.viewpoints, setup.tracker
+        self._kin = Kinematics(self._grid, self.sim_cfg.agent, self._actuation)
         self.spec_episode = spec
         self._frame = self._render()
         self._tracker.reset(self._state.position, self._frame.semantic)
         odo = self._odometry.reset(self._state)
-        return self._obs(odo), self._info()
-
-    def _random_reachable_start(self, grid, field, rng) -> np.ndarray:
-        for _ in range(1000):
-            p = grid.random_point(rng)
-            d = field.distance(p)
-            if math.isfinite(d) and d > self.task_cfg.success_distance:
-                return p
-        raise ValueError("could not find a navigable start connected to the goal in 1000 tries")
+        return self._obs(odo), {"episode_id": spec.episode_id}
 
     # -- stepping -------------------------------------------------------------------------------
     def _render(self) -> Frame:
@@ -201,26 +141,14 @@ class ObjectNavEnv(gym.Env):
         depth = self._frame.depth
         depth = np.where(depth > 0, np.clip(depth, cam.min_depth, cam.max_depth), cam.max_depth)
         obs = {
-            "rgb": self._frame.rgb,
             "depth": depth.astype(np.float32, copy=False),
             "odometry": odometry.astype(np.float32),
             "goal": self.spec_episode.goal_category,
             "collided": int(collided),
         }
-        if self.privileged_obs:
-            obs["semantic"] = self._frame.semantic
+        if cam.rgb:
+            obs["rgb"] = self._frame.rgb
         return obs
-
-    def _info(self) -> dict:
-        t = self._tracker
-        return {
-            "position": self._state.position.copy(),
-            "yaw": self._state.yaw,
-            "pitch": self._state.pitch,
-            "distance_to_goal": t.distance,
-            "collided": False,
-            "episode_id": self.spec_episode.episode_id,
-        }
 
     def step(self, action):
         action = int(action)
@@ -236,8 +164,7 @@ class ObjectNavEnv(gym.Env):
         reward = float(self._tracker.reward())
         terminated = action == STOP
         truncated = not terminated and self._tracker.steps >= self.task_cfg.max_steps
-        info = self._info()
-        info["collided"] = result.collided
+        info = {"episode_id": self.spec_episode.episode_id}
         if terminated or truncated:
             info["metrics"] = self._tracker.metrics().to_dict()
         return self._obs(odo, result.collided), reward, terminated, truncated, info
@@ -246,9 +173,11 @@ class ObjectNavEnv(gym.Env):
         return self._frame.rgb
 
     def privileged(self) -> Privileged:
+        """The one channel to ground truth (experts, oracles, failure analysis, recording)."""
         return Privileged(
             self._state.copy(), self._grid, self._field, self._viewpoints,
-            self._tracker.goal_ids, self._frame, self._world,
+            self._tracker.goal_ids, self._frame, self._world, float(self._tracker.distance),
+            self.sim_cfg, self.task_cfg,
         )
 
     @property
@@ -259,3 +188,23 @@ class ObjectNavEnv(gym.Env):
         if self._world is not None:
             self._world.close()
             self._world = None
+
+
+def observation_spaces(sim: SimConfig) -> dict[str, spaces.Space]:
+    """The plain env's observation spaces (RGB only when the camera renders it)."""
+    cam = sim.camera
+    obs: dict[str, spaces.Space] = {
+        "depth": spaces.Box(0.0, cam.max_depth, (cam.height, cam.width), np.float32),
+        "odometry": spaces.Box(
+            np.array([-ODOMETRY_LIMIT_M, -ODOMETRY_LIMIT_M, -math.pi], np.float32),
+            np.array([ODOMETRY_LIMIT_M, ODOMETRY_LIMIT_M, math.pi], np.float32),
+            (3,),
+            np.float32,
+        ),
+        "goal": spaces.Text(MAX_GOAL_LEN, min_length=1, charset=GOAL_CHARSET),
+        # 1 when the step that led here was blocked (a bump sensor; task.md reports it each step)
+        "collided": spaces.Discrete(2),
+    }
+    if cam.rgb:
+        obs = {"rgb": spaces.Box(0, 255, (cam.height, cam.width, 3), np.uint8), **obs}
+    return obs

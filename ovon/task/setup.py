@@ -1,0 +1,83 @@
+"""Episode set-up: from a loaded world and an `EpisodeSpec` to the true start state, the goal set and a
+fresh `EpisodeTracker`.
+
+Why a task function and not env code: the simulator knows scenes, grids and cameras but nothing of
+goals; the Gymnasium env (ovon.env) only sequences reset/step. Dataset tools and tests can set up the
+same episode without an env.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ovon.config.task import TaskConfig
+from ovon.sim.geodesic import DistanceField, distance_field
+from ovon.sim.types import AgentState
+from ovon.sim.world import World
+from ovon.task.episode import EpisodeSpec, GoalViewpoint
+from ovon.task.goals import distractors, goal_instances, points_near_objects
+from ovon.task.tracker import EpisodeTracker
+
+
+@dataclass
+class EpisodeSetup:
+    """Everything ground truth about one episode at its start."""
+
+    state: AgentState  # true start pose
+    grid: object  # NavGrid of the start floor
+    goal_field: DistanceField  # geodesic distance to the nearest goal viewpoint
+    viewpoints: list[GoalViewpoint]
+    goal_ids: frozenset[int]
+    tracker: EpisodeTracker  # reset by the env once the first frame is rendered
+
+
+def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig) -> EpisodeSetup:
+    """Goal instances, viewpoints (the episode's own, or navigable points within 1 m of the goals for
+    ad-hoc episodes), the goal distance field, and the start (the episode's, or a seeded random one
+    connected to the goals). Raises ValueError when the episode cannot be set up in this world."""
+    objs = goal_instances(world.scene, spec)
+    if spec.start_position is not None:
+        start_pos = np.asarray(spec.start_position, dtype=np.float64)
+        grids = [world.nav.grid_for(start_pos)]
+    else:
+        # Random start: on the floor of a random viewpoint / goal object (a seeded choice).
+        start_pos = None
+        anchors = [v.position for v in spec.viewpoints] or [o.aabb_min for o in objs]
+        grids = []
+        for i in rng.permutation(len(anchors)):
+            g = world.nav.grid_for(anchors[int(i)])
+            if all(g is not h for h in grids):
+                grids.append(g)
+    grid, points = grids[0], np.zeros((0, 3))
+    if spec.viewpoints:
+        viewpoints = spec.viewpoints
+        points = np.stack([v.position for v in viewpoints])
+    else:
+        for grid in grids:
+            points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
+            if len(points):
+                break
+        if len(points) == 0:
+            raise ValueError(f"no navigable point within 1 m of any {spec.goal_category!r} on its floor")
+        viewpoints = [GoalViewpoint(p, 0.0) for p in points]
+    field = distance_field(grid, points)
+    if start_pos is None:
+        start_pos = _random_reachable_start(grid, field, rng, task.success_distance)
+    yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
+    goal_ids = frozenset(o.id for o in objs)
+    tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=goal_ids, cfg=task,
+                             distractors=distractors(world.scene, spec.goal_categories))
+    state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
+    return EpisodeSetup(state, grid, field, list(viewpoints), goal_ids, tracker)
+
+
+def _random_reachable_start(grid, field: DistanceField, rng: np.random.Generator, min_distance: float) -> np.ndarray:
+    for _ in range(1000):
+        p = grid.random_point(rng)
+        d = field.distance(p)
+        if math.isfinite(d) and d > min_distance:
+            return p
+    raise ValueError("could not find a navigable start connected to the goal in 1000 tries")

@@ -1,0 +1,223 @@
+"""The run object: all scaffolding of a training run, so that each algorithm file reads top to bottom.
+
+It owns the process group (one process, or one rank under torchrun), seeding, the run folder, the
+goal-text table, the envs, building or loading the policy, exact resume, logging, checkpoints and the
+rank report. The algorithm owns its loop, its optimiser and the state it needs to resume (acting
+memory, DAgger buffer), which it hands to `save` as `rank_state`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from ovon.config.task import TaskConfig
+from ovon.task.episode import EpisodeSpec
+from ovon.train import distributed as dist
+from ovon.train.checkpoint import export_policy, load_checkpoint, rng_state, save_checkpoint, seed_everything
+from ovon.train.checkpoint import set_rng_state as _set_rng_state
+from ovon.train.config import TrainConfig
+from ovon.train.logging import RunLogger
+
+
+class TrainRun:
+    """`TrainRun(cfg, out_dir, algo, init=...)`: joins the process group, seeds this rank, prepares the
+    folder; with `init` (a policy.pt or run folder) the policy and encoder configs become the init's."""
+
+    def __init__(self, cfg: TrainConfig, out_dir: str | Path, algo: str, init: str | None = None,
+                 resume: bool = False) -> None:
+        self.info = dist.setup(cfg.device)
+        self.device = self.info.device
+        if cfg.threads > 0:
+            torch.set_num_threads(cfg.threads)
+        self.learn_threads = torch.get_num_threads()
+        seed_everything(cfg.seed + 7919 * self.info.rank)
+        self.out = Path(out_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.algo = algo
+        self.resume_requested = resume
+        self.init_policy = load_init_policy(init, cfg.encoder) if init else None
+        if self.init_policy is not None:
+            cfg = dataclasses.replace(cfg, policy=self.init_policy.cfg,
+                                      encoder=self.init_policy.encoder_cfg or cfg.encoder)
+        self.cfg = cfg
+        self.table: dict = {}
+        self.envs = None
+        self.logger: RunLogger | None = None
+        self.start_update, self.step = 0, 0
+
+    @property
+    def is_main(self) -> bool:
+        return self.info.is_main
+
+    # -- inputs -------------------------------------------------------------------------------------
+    def text_table(self, specs: list[EpisodeSpec]) -> dict:
+        """Rank 0 computes and caches the goal-text table; the other ranks read the cache after a barrier."""
+        from ovon.train.text import needed_texts, text_table
+
+        path = Path(self.cfg.text_cache) if self.cfg.text_cache else self.out / "text_cache.pt"
+        texts = needed_texts(specs)
+        if self.is_main:
+            self.table = text_table(self.cfg.encoder, texts, path, write=True)
+        dist.barrier(self.info)
+        if not self.is_main:
+            self.table = text_table(self.cfg.encoder, texts, path, write=False)
+        return self.table
+
+    def open_envs(self, specs: list[EpisodeSpec], task: TaskConfig, label: bool):
+        """This rank's share of the episodes in the training env stack (labelled by the expert when
+        `label`); returns (envs, first batch)."""
+        from ovon.env.stack import EnvRecipe
+        from ovon.train.envs import TrainEnvs
+
+        cfg = self.cfg
+        mine = dist.shard(list(specs), self.info)
+        table = self.text_table(list(specs))
+        recipe = EnvRecipe(sim=cfg.sim, task=task, encoder=cfg.encoder,
+                           text_table={k: torch.as_tensor(v).float().numpy() for k, v in table.items()},
+                           expert=cfg.expert if label else None, expert_cfg=expert_config(cfg) if label else None,
+                           expert_viewpoint_radius=cfg.expert_viewpoint_radius_m, scene_repeat=cfg.scene_repeat)
+        self.envs = TrainEnvs(recipe, mine, cfg.num_envs, cfg.env_workers, cfg.seed * 1000 + self.info.rank)
+        return self.envs, self.envs.reset()
+
+    def build_policy(self, image_dim: int, text_dim: int):
+        """The init policy (fine-tuning) or a new one, checked against the envs' dims, on this device."""
+        from ovon.models.policy import build_policy
+
+        cfg = self.cfg
+        if cfg.encoder.image == "cnn":
+            image_dim = cfg.encoder.cnn_dim
+        policy = self.init_policy or build_policy(cfg.policy, image_dim, text_dim, cfg.encoder)
+        if (policy.image_dim, policy.text_dim) != (image_dim, text_dim):
+            raise ValueError(f"policy expects image/text dims {(policy.image_dim, policy.text_dim)}, "
+                             f"the envs give {(image_dim, text_dim)}")
+        policy.text_table = self.table
+        self.policy = policy.to(self.device)
+        return self.policy
+
+    # -- threads ------------------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def acting(self) -> Iterator[None]:
+        """Rollouts: the env workers need the cores, so the learner acts with `rollout_threads` (an idle
+        multi-threaded torch pool spins and steals CPU from the workers on a small machine)."""
+        if self.cfg.rollout_threads > 0 and self.cfg.rollout_threads != self.learn_threads:
+            torch.set_num_threads(self.cfg.rollout_threads)
+            try:
+                yield
+            finally:
+                torch.set_num_threads(self.learn_threads)
+        else:
+            yield
+
+    # -- resume / log / checkpoint -------------------------------------------------------------------
+    def restore(self, optimizer) -> dict | None:
+        """With `resume` and a checkpoint: weights, optimiser, counters; returns this rank's saved state
+        (the caller restores its own parts, then `restore_rng(state)` last). None on a fresh run."""
+        if not (self.resume_requested and (self.out / "checkpoint.pt").exists()):
+            return None
+        ckpt = load_checkpoint(self.out, map_location=self.device)
+        if ckpt["world_size"] != self.info.world_size:
+            raise ValueError(f"checkpoint was written by {ckpt['world_size']} ranks; this run has "
+                             f"{self.info.world_size}")
+        if ckpt.get("algo") not in (None, self.algo):
+            raise ValueError(f"{self.out} holds a {ckpt['algo']!r} run; resume it with that algorithm or "
+                             f"choose another --out")
+        self.policy.load_state_dict(ckpt["policy"])
+        optimizer.load_state_dict(ckpt["optimizer"])
+        self.start_update, self.step = ckpt["update"], ckpt["step"]
+        return ckpt["ranks"][self.info.rank]
+
+    @staticmethod
+    def restore_rng(state: dict) -> None:
+        _set_rng_state(state["rng"])
+
+    def open_logger(self, total: int, description: str | None = None) -> RunLogger:
+        self.logger = RunLogger(self.out, total, description or self.algo, self.is_main, self.cfg.progress,
+                                self.start_update, self.step)
+        return self.logger
+
+    def log(self, update: int, metrics: dict) -> None:
+        assert self.logger is not None
+        self.logger.log(update, self.step, metrics)
+
+    def save(self, update: int, optimizer, rank_state: dict) -> None:
+        """Gather every rank's state (RNG, envs, acting memory) and let rank 0 write checkpoint + policy."""
+        from ovon.config.base import to_dict
+
+        ranks = dist.gather_objects({**rank_state, "rng": rng_state()}, self.info)
+        if self.is_main:
+            cfg = self.cfg
+            save_checkpoint(self.out, {"algo": self.algo, "config": to_dict(cfg), "policy": self.policy.state_dict(),
+                                       "optimizer": optimizer.state_dict(), "update": update, "step": self.step,
+                                       "world_size": self.info.world_size, "ranks": ranks, "extra": {}})
+            export_policy(self.policy, self.out, policy_extra(cfg, self.algo, update, self.step, self.policy),
+                          update, cfg.keep_checkpoints)
+        dist.barrier(self.info)
+
+    def due(self, update: int, total: int, every: int) -> bool:
+        """Whether update `update` (1-based) is a logging / checkpoint point."""
+        return update % every == 0 or update == total
+
+    def finish(self, update: int) -> None:
+        """Per-rank parameter checksum (DDP ranks must agree; the torchrun test reads it)."""
+        d = self.out / "ranks"
+        d.mkdir(parents=True, exist_ok=True)
+        (d / f"rank{self.info.rank}.json").write_text(json.dumps(
+            {"rank": self.info.rank, "world_size": self.info.world_size, "update": update,
+             "checksum": param_checksum(self.policy)}))
+
+    def close(self) -> None:
+        if self.logger is not None:
+            self.logger.close()
+        if self.envs is not None:
+            self.envs.close()
+
+
+# ----- helpers ---------------------------------------------------------------------------------------
+def expert_config(cfg: TrainConfig) -> Any:
+    """The `TrainConfig`'s config for its labelling expert."""
+    return cfg.frontier_expert if cfg.expert == "frontier" else cfg.shortest_path_expert
+
+
+def load_init_policy(path: str | Path, encoder_cfg):
+    """The IL policy to fine-tune: a `policy.pt`, or a run folder holding one."""
+    from ovon.models.policy import ActorCritic
+
+    path = Path(path)
+    if path.is_dir():
+        path = path / "policy.pt"
+    if not path.is_file():
+        raise FileNotFoundError(f"--init {path} does not exist; pass a policy.pt written by ovon train or its folder")
+    policy = ActorCritic.load(path)
+    if policy.encoder_cfg is not None and policy.encoder_cfg.image != encoder_cfg.image:
+        raise ValueError(f"--init {path} was trained with encoder {policy.encoder_cfg.image!r}, "
+                         f"not {encoder_cfg.image!r}")
+    return policy
+
+
+def num_updates(cfg: TrainConfig, world_size: int) -> int:
+    if cfg.max_updates > 0:
+        return cfg.max_updates
+    return max(1, cfg.total_steps // (cfg.num_envs * world_size * cfg.rollout_steps))
+
+
+def policy_extra(cfg: TrainConfig, algo: str, update: int, step: int, policy) -> dict:
+    """What `PolicyAgent` needs besides weights: the goal-text table and the camera it was trained with."""
+    from ovon.config.base import to_dict
+
+    table = getattr(policy, "text_table", None) or {}
+    return {"algo": algo, "update": update, "step": step, "expert": cfg.expert,
+            "text_table": {k: torch.as_tensor(v).float() for k, v in table.items()},
+            "camera": {k: v for k, v in to_dict(cfg.sim.camera).items() if isinstance(v, int | float | str)}}
+
+
+def param_checksum(module: torch.nn.Module) -> float:
+    """Sum over parameters in float64: identical across DDP ranks when they stay in sync."""
+    with torch.no_grad():
+        return float(sum(p.detach().double().sum().item() for p in module.parameters()))
