@@ -217,3 +217,19 @@ def test_cli_evaluate_vlfm_and_report_row_names(tiny_dataset, tiny_scenes, tmp_p
     assert "| VLFM, oracle detection, oracle-vl value | – |" in md
     for name in ("sr_vs_distance.png", "failures_vlfm_vlfm.png", "failures_vlfm_vlfm_noisy.png"):
         assert Path(tmp_path / "rep" / name).stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_demo_runs_the_vlfm_row(tmp_path):
+    """`ovon demo` at its smallest: the report has the VLFM row; deterministic agents ran one seed."""
+    import json
+
+    from ovon.cli.main import main as ovon
+
+    root = tmp_path / "demo"
+    assert ovon(["demo", "--root", str(root), "--train-scenes", "1", "--val-scenes", "1", "--episodes", "1",
+                 "--seeds", "0,1", "--workers", "1"]) == 0
+    md = (root / "runs" / "report" / "report.md").read_text()
+    assert "| VLFM, oracle detection, oracle-vl value |" in md
+    seeds = {a: json.loads((root / "runs" / a / "run.json").read_text())["seeds"] for a in ("random", "vlfm")}
+    assert seeds == {"random": [0, 1], "vlfm": [0]}

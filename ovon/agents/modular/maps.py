@@ -29,7 +29,7 @@ from ovon.maps import ExploredMap, FrontierMap, Frontiers
 
 
 @nb.njit(cache=True, nogil=True)
-def _add_obstacles(obstacle, transparent, navigable, penalty, rr, cc, off_r, off_c, off_ring, out_r, out_c):
+def _add_obstacles(obstacle, navigable, penalty, rr, cc, off_r, off_c, off_ring, out_r, out_c):
     """Mark obstacle cells, inflate them and raise the penalty ring; returns how many cells stopped being
     navigable (written to out_r/out_c)."""
     rows, cols = obstacle.shape
@@ -40,7 +40,6 @@ def _add_obstacles(obstacle, transparent, navigable, penalty, rr, cc, off_r, off
         if obstacle[r, c]:
             continue
         obstacle[r, c] = True
-        transparent[r, c] = False
         for j in range(off_r.shape[0]):
             nr = r + off_r[j]
             nc = c + off_c[j]
@@ -87,7 +86,6 @@ class AgentMaps:
         # world (x, z) of cell (0, 0)'s corner; the start (0, 0) is the centre of cell (n // 2, n // 2)
         self.origin = np.full(2, -(n // 2 + 0.5) * cs)
         self.obstacle = np.zeros(self.shape, dtype=np.bool_)
-        self.transparent = np.ones(self.shape, dtype=np.bool_)
         self.navigable = np.ones(self.shape, dtype=np.bool_)
         self.penalty = np.zeros(self.shape, dtype=np.uint8)
         body = sensors.body
@@ -96,7 +94,7 @@ class AgentMaps:
         self.radius_m = float(body.radius if cfg.inflation_radius_m is None else cfg.inflation_radius_m)
         self._off = inflation_offsets(self.radius_m / cs)
         self.projector = DepthProjector(sensors.camera, cfg.pixel_stride)
-        # opaque = not navigable (VLFM); `transparent` (obstacle cells only) is kept for callers that want it
+        # opaque = not navigable (VLFM)
         self.explored_map = ExploredMap(self.navigable, self.navigable, cs, sensors.camera.hfov_deg, cfg.view_range_m)
         min_cells = max(1, int(math.ceil(cfg.min_frontier_m / cs - 1e-9)))
         self.frontier_map = FrontierMap(
@@ -110,7 +108,6 @@ class AgentMaps:
 
     def reset(self) -> None:
         self.obstacle[:] = False
-        self.transparent[:] = True
         self.navigable[:] = True
         self.penalty[:] = 0
         self.explored_map.reset()
@@ -154,7 +151,7 @@ class AgentMaps:
         out_r = np.empty(cap, dtype=np.int32)
         out_c = np.empty(cap, dtype=np.int32)
         m = _add_obstacles(
-            self.obstacle, self.transparent, self.navigable, self.penalty, rr, cc, off_r, off_c, ring, out_r, out_c
+            self.obstacle, self.navigable, self.penalty, rr, cc, off_r, off_c, ring, out_r, out_c
         )
         if m:
             self.frontier_map.update_navigability(out_r[:m], out_c[:m])

@@ -9,7 +9,6 @@ yaw = dyaw. The floor is at y = 0 (one floor per episode), so a point's y is its
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,7 +93,3 @@ class DepthProjector:
         sub = depth[::s, ::s]
         rr, cc = np.nonzero(sub < self.camera.max_depth * max_fraction)
         return self.project(depth, pose, pitch, rr * s, cc * s)
-
-
-def wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
