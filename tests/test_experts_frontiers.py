@@ -9,9 +9,9 @@ import pytest
 from scipy import ndimage
 
 from ovon.experts import FrontierExpert, FrontierExpertConfig
-from ovon.experts.frontiers import FrontierMap
 from ovon.experts.gridsim import grid_from_arrays, rollout, room_grid
-from ovon.experts.visibility import ExploredMap
+from ovon.maps.frontiers import FrontierMap
+from ovon.maps.visibility import ExploredMap
 from ovon.sim.types import AgentState
 
 

@@ -1,7 +1,7 @@
 """Visibility of the frontier expert's explored map against an exact, slow reference.
 
 The reference decides line of sight with exact rational arithmetic: a cell blocks the view when its
-closed square meets the segment between the two cell centres (see ovon/experts/visibility.py).
+closed square meets the segment between the two cell centres (see ovon/maps/visibility.py).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ovon.experts.visibility import ExploredMap, cone_params
+from ovon.maps.visibility import ExploredMap, cone_params
 
 
 def _segment_meets_square(r0: int, c0: int, r1: int, c1: int, r: int, c: int) -> bool:

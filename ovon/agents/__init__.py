@@ -19,6 +19,8 @@ BUILTIN: dict[str, str] = {
     "shortest-path": "ovon.agents.expert_agents:ShortestPathAgent",
     "frontier": "ovon.agents.expert_agents:FrontierAgent",
     "policy": "ovon.agents.policy_agent:PolicyAgent",
+    "vlfm": "ovon.agents.modular.vlfm:VLFMAgent",
+    "dagrl-od": "ovon.agents.modular.dagrl_od:DAgRLODAgent",
 }
 
 _FIX = "fix: use one of {builtin} or 'package.module:ClassName' (a class with reset(episode_info) and act(observation))"

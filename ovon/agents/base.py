@@ -5,9 +5,10 @@
         def reset(self, episode_info: dict) -> None: ...
         def act(self, observation: dict) -> int: ...   # 0 STOP, 1 FORWARD, 2 LEFT, 3 RIGHT, 4 UP, 5 DOWN
 
-`episode_info` holds episode_id, scene_id, split, goal (text) and seed. `observation` holds rgb (H,W,3)
+`episode_info` holds episode_id, scene_id, split, goal (text), seed, and the robot's calibration ("camera",
+"embodiment": the `CameraConfig` / `AgentConfig` fields of the run). `observation` holds rgb (H,W,3)
 uint8, depth (H,W) float32 metres, odometry (3,) float32 (forward m, left m, dyaw rad since the start),
-goal (str) — and "privileged" (`ovon.sim.env.Privileged`) only for agents that declare it.
+goal (str) — and "privileged" (`ovon.env.Privileged`) only for agents that declare it.
 """
 
 from __future__ import annotations

@@ -20,10 +20,11 @@ def _csv(s: str) -> list[str]:
 
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="run an agent over val splits and seeds; resumable")
-    p.add_argument("--agent", required=True, help="random | shortest-path | frontier | policy | pkg.module:Class")
+    p.add_argument("--agent", required=True,
+                   help="random | shortest-path | frontier | policy | vlfm | dagrl-od | pkg.module:Class")
     p.add_argument("--agent-arg", action="append", default=[], metavar="KEY=VALUE",
                    help="keyword argument for the agent's constructor (repeatable)")
-    p.add_argument("--checkpoint", help="policy checkpoint (for --agent policy)")
+    p.add_argument("--checkpoint", help="policy checkpoint (for --agent policy and dagrl-od)")
     p.add_argument("--data", required=True, help="episode dataset root (holds val_seen/ ...)")
     p.add_argument("--scenes", required=True, help="scene-datasets root or the scene dataset folder")
     p.add_argument("--splits", default="val_seen,val_seen_synonyms,val_unseen")
@@ -124,7 +125,7 @@ def eval_config(args) -> EvalConfig:
     })
     if args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
-    elif args.preset == "auto" and args.agent == "policy" and cfg.agent_kwargs.get("checkpoint"):
+    elif args.preset == "auto" and args.agent in ("policy", "dagrl-od") and cfg.agent_kwargs.get("checkpoint"):
         camera = trained_camera(str(cfg.agent_kwargs["checkpoint"]))
         if camera:
             cfg = dataclasses.replace(cfg, sim=dataclasses.replace(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import zlib
 
 from ovon.agents.base import is_privileged
@@ -27,6 +28,9 @@ def run_episode(env, agent, spec: EpisodeSpec, seed: int, record_path: bool = Fa
             "split": spec.split,
             "goal": spec.goal_category,
             "seed": ep_seed,
+            # the robot's calibration (not privileged): camera intrinsics and body, for agents that map
+            "camera": dataclasses.asdict(truth.sim_cfg.camera),
+            "embodiment": dataclasses.asdict(truth.sim_cfg.agent),
         }
     )
     privileged = is_privileged(agent)

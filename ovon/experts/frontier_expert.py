@@ -31,7 +31,6 @@ from ovon.experts.control import (
     nearest_path_index,
     trace_parents,
 )
-from ovon.experts.frontiers import FrontierMap
 from ovon.experts.rig import Embodiment
 from ovon.experts.shortest_path import (
     DistanceFieldFn,
@@ -40,7 +39,8 @@ from ovon.experts.shortest_path import (
     agent_cell,
     default_distance_field_fn,
 )
-from ovon.experts.visibility import ExploredMap
+from ovon.maps.frontiers import FrontierMap
+from ovon.maps.visibility import ExploredMap
 from ovon.sim.types import AgentState
 
 
@@ -276,7 +276,7 @@ class FrontierExpert:
         if len(fr) == 0:
             return
         wr, wc = fr.rows, fr.cols
-        if self.navigable[row, col]:
+        if self.navigable[row, col] and fm.islands is not None:
             isl = fm.islands[row, col]
             keep = fm.islands[wr, wc] == isl
             wr, wc = wr[keep], wc[keep]

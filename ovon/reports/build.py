@@ -6,7 +6,8 @@ import re
 from pathlib import Path
 
 from ovon.atomic import atomic_write_text
-from ovon.reports.compare import load_run, markdown_report
+from ovon.reports.compare import load_meta, load_run, markdown_report
+from ovon.reports.labels import run_label
 from ovon.reports.plots import plot_failures, plot_sr_per_category, plot_sr_vs_distance
 
 
@@ -15,14 +16,26 @@ def _slug(s: str) -> str:
 
 
 def build_report(run_dirs: list[str | Path], out_dir: str | Path) -> Path:
-    runs = [load_run(d) for d in run_dirs]
+    """Tables and figures for the run folders. Rows are named by what the run uses (`run_label`: agent,
+    perception, noise); figure files by the run's `name`."""
+    loaded = [load_run(d) for d in run_dirs]
+    metas = [load_meta(d) for d in run_dirs]
+    labels = [run_label(m) if m else name for (name, _), m in zip(loaded, metas)]
+    seen: dict[str, int] = {}
+    for i, label in enumerate(labels):  # two runs with one label stay two rows
+        seen[label] = seen.get(label, 0) + 1
+        if seen[label] > 1:
+            labels[i] = f"{label} ({Path(run_dirs[i]).name})"
+    runs = [(label, recs) for label, (_, recs) in zip(labels, loaded)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    md = markdown_report(runs)
+    md = markdown_report(runs, metas)
     figs = [plot_sr_vs_distance(runs, out / "sr_vs_distance.png")]
-    for name, recs in runs:
-        figs.append(plot_failures(name, recs, out / f"failures_{_slug(name)}.png"))
-        figs.append(plot_sr_per_category(name, recs, out / f"sr_per_category_{_slug(name)}.png"))
+    names = [name for name, _ in loaded]
+    for i, (label, recs) in enumerate(runs):
+        slug = _slug(names[i] if names.count(names[i]) == 1 else f"{names[i]}_{Path(run_dirs[i]).name}")
+        figs.append(plot_failures(label, recs, out / f"failures_{slug}.png"))
+        figs.append(plot_sr_per_category(label, recs, out / f"sr_per_category_{slug}.png"))
     md += "\n## Figures\n\n" + "\n".join(f"![{f.stem}]({f.name})" for f in figs) + "\n"
     atomic_write_text(out / "report.md", md)
     return out / "report.md"

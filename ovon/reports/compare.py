@@ -6,8 +6,15 @@ import json
 from collections import defaultdict
 from pathlib import Path
 
-from ovon.evaluate.results import paper_table, read_records, summarize
+from ovon.evaluate.results import SPLIT_ORDER, paper_table, read_records, summarize
+from ovon.reports.labels import agent_label, noise_label
 from ovon.task.tracker import FAILURE_LABELS
+
+
+def load_meta(run_dir: str | Path) -> dict:
+    """The run's `run.json` (agent, agent_kwargs, sim incl. noise, name), {} when absent."""
+    meta = Path(run_dir) / "run.json"
+    return json.loads(meta.read_text()) if meta.exists() else {}
 
 
 def load_run(run_dir: str | Path) -> tuple[str, list[dict]]:
@@ -16,10 +23,7 @@ def load_run(run_dir: str | Path) -> tuple[str, list[dict]]:
         raise FileNotFoundError(
             f"{run_dir} is not a run folder (no episodes.jsonl); run `ovon evaluate --out {run_dir}`"
         )
-    name = run_dir.name
-    meta = run_dir / "run.json"
-    if meta.exists():
-        name = json.loads(meta.read_text()).get("name") or name
+    name = load_meta(run_dir).get("name") or run_dir.name
     return name, read_records(run_dir)
 
 
@@ -54,9 +58,34 @@ def distance_bin(d: float) -> str:
     return "nan"
 
 
-def markdown_report(runs: list[tuple[str, list[dict]]]) -> str:
+def noise_table(rows: list[tuple[str, str, dict]]) -> str:
+    """The paper's noise table: one line per (agent, eval noise), agents in first-seen order, the run
+    without noise first; SR / SPL per split (mean ± std over seeds, %)."""
+    splits = [s for s in SPLIT_ORDER if any(s in summ for _, _, summ in rows)]
+    head = "| method | eval noise | " + " | ".join(f"{s} SR | {s} SPL" for s in splits) + " |"
+    lines = [head, "|---|---|" + "---|---|" * len(splits)]
+    order = list(dict.fromkeys(label for label, _, _ in rows))
+    for label in order:
+        for _, noise, summ in sorted((r for r in rows if r[0] == label), key=lambda r: r[1] != ""):
+            cells = []
+            for s in splits:
+                for metric in ("sr", "spl"):
+                    if s not in summ:
+                        cells.append("–")
+                        continue
+                    m, sd = summ[s][metric]["mean"], summ[s][metric]["std"]
+                    cells.append(f"{100 * m:.1f} ± {100 * sd:.1f}")
+            lines.append(f"| {label} | {'✓ ' + noise if noise else '–'} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def markdown_report(runs: list[tuple[str, list[dict]]], metas: list[dict] | None = None) -> str:
+    """`runs` = (row name, records); `metas` (run.json per run) adds the noise table when any run has noise."""
     rows = {name: summarize(recs) for name, recs in runs}
     parts = ["# ovon evaluation report", "", "## SR / SPL (%), mean ± std over seeds", "", paper_table(rows), ""]
+    if metas and any(noise_label(m) for m in metas):
+        noisy = [(agent_label(m), noise_label(m), rows[name]) for (name, _), m in zip(runs, metas)]
+        parts += ["## Noise (each agent with and without evaluation noise)", "", noise_table(noisy), ""]
     parts += ["## Failure breakdown (% of all episodes)", ""]
     for name, recs in runs:
         fb = failure_breakdown(recs)

@@ -1,5 +1,9 @@
 """Explored map: which cells have been in the camera's horizontal view cone with line of sight.
 
+One implementation for the privileged frontier expert (true map, fixed) and the modular agents (their own
+map from depth + odometry, which grows: `transparent` is read at every update, so a caller may change it
+in place between updates).
+
 Definition (exact, shared with the brute-force reference in tests/test_experts_visibility.py):
 a cell T is visible from the agent cell A with heading yaw when
   * T == A, or
@@ -41,14 +45,18 @@ def _cone_update(
     cmax: int,
     out_r: np.ndarray,
     out_c: np.ndarray,
+    update: bool,
 ) -> int:
-    """Mark the unexplored visible cells of the box [rmin, rmax] x [cmin, cmax]; return how many."""
+    """Visible cells of the box [rmin, rmax] x [cmin, cmax] into out_r/out_c; return how many.
+
+    `update`: only the unexplored ones, which are marked explored (the explored map); else every visible
+    cell, nothing marked (what one frame sees, e.g. for a value map)."""
     n = 0
     range2 = range_cells * range_cells
     for r in range(rmin, rmax + 1):
         dr = r - r0
         for c in range(cmin, cmax + 1):
-            if explored[r, c]:
+            if update and explored[r, c]:
                 continue
             dc = c - c0
             d2 = float(dr * dr + dc * dc)
@@ -60,7 +68,8 @@ def _cone_update(
                     continue
                 if not los_clear(transparent, r0, c0, r, c):
                     continue
-            explored[r, c] = True
+            if update:
+                explored[r, c] = True
             out_r[n] = r
             out_c[n] = c
             n += 1
@@ -114,37 +123,36 @@ class ExploredMap:
         self._buf_c = np.empty(cap, dtype=np.int32)
         self.new_r = self._buf_r[:0]  # cells newly explored by the last update (views into a buffer)
         self.new_c = self._buf_c[:0]
+        self._vis_r = np.empty(cap, dtype=np.int32)
+        self._vis_c = np.empty(cap, dtype=np.int32)
 
     def reset(self) -> None:
         self.explored[:] = False
         self.new_r = self._buf_r[:0]
         self.new_c = self._buf_c[:0]
 
-    def update(self, row: int, col: int, yaw: float) -> int:
-        """Explore from the agent cell with heading `yaw`; return the number of newly explored cells."""
+    def _cone(self, row: int, col: int, yaw: float, out_r: np.ndarray, out_c: np.ndarray, update: bool) -> int:
         rows, cols = self.explored.shape
         if not (0 <= row < rows and 0 <= col < cols):
-            self.new_r = self._buf_r[:0]
-            self.new_c = self._buf_c[:0]
             return 0
         fr, fc, cos_half = cone_params(yaw, self.fov_deg)
         rmin, rmax, cmin, cmax = cone_bbox(row, col, yaw, self.fov_deg, self.range_cells, (rows, cols))
-        n = _cone_update(
-            self.transparent,
-            self.explored,
-            int(row),
-            int(col),
-            fr,
-            fc,
-            cos_half,
-            self.range_cells,
-            rmin,
-            rmax,
-            cmin,
-            cmax,
-            self._buf_r,
-            self._buf_c,
+        return int(
+            _cone_update(
+                self.transparent, self.explored, int(row), int(col), fr, fc, cos_half, self.range_cells,
+                rmin, rmax, cmin, cmax, out_r, out_c, update,
+            )
         )
+
+    def update(self, row: int, col: int, yaw: float) -> int:
+        """Explore from the agent cell with heading `yaw`; return the number of newly explored cells."""
+        n = self._cone(row, col, yaw, self._buf_r, self._buf_c, True)
         self.new_r = self._buf_r[:n]
         self.new_c = self._buf_c[:n]
-        return int(n)
+        return n
+
+    def visible(self, row: int, col: int, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+        """Every cell visible from the agent cell now, explored or not (views into a buffer reused by the
+        next call); the explored map is not changed."""
+        n = self._cone(row, col, yaw, self._vis_r, self._vis_c, False)
+        return self._vis_r[:n], self._vis_c[:n]

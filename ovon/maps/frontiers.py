@@ -1,5 +1,9 @@
 """Frontiers of an explored map, updated incrementally.
 
+One implementation for the privileged frontier expert (the true navigability, fixed per episode) and the
+modular agents (their own navigability from depth + odometry, which changes as obstacles are observed:
+`update_navigability` accounts for cells whose flag the caller changed in place).
+
 * Frontier cell: explored, navigable, 4-adjacent to an unexplored navigable cell.
 * Pocket: a 4-connected component of unexplored navigable cells whose area (cells * cell_size**2, in m^2)
   is below `pocket_area_m2`; pockets count as explored (upstream squared the area wrongly).
@@ -90,7 +94,7 @@ def _update(
     for k in range(n_new):
         r0 = new_r[k]
         c0 = new_c[k]
-        for d in range(4):
+        for d in range(5):  # the 4 neighbours, then the cell itself (a cell that just became navigable)
             sr = r0 + (d == 1) - (d == 0)
             sc = c0 + (d == 3) - (d == 2)
             if sr < 0 or sr >= rows or sc < 0 or sc >= cols:
@@ -252,7 +256,10 @@ class FrontierMap:
         cell_size: float,
         pocket_area_m2: float,
         min_frontier_cells: int = 1,
+        islands: bool = True,
     ) -> None:
+        """`islands`: label the navigable map's islands once (a fixed map: the expert keeps to its island and
+        small islands count as explored at reset); a growing map has no meaningful islands."""
         self.navigable = np.ascontiguousarray(navigable, dtype=np.bool_)
         self.explored = explored  # shared with the ExploredMap, modified in place (pocket filling)
         self.cell_size = float(cell_size)
@@ -269,10 +276,13 @@ class FrontierMap:
         self._stamp_next = 1
         self._queue_r = np.empty(n + 1, dtype=np.int32)
         self._queue_c = np.empty(n + 1, dtype=np.int32)
-        # components of the navigable map: the initial unexplored components (labelled once per grid)
-        labels, k = ndimage.label(self.navigable)
-        self.islands = labels.astype(np.int32) - 1  # -1 off the navigable map, 4-connected islands
-        self.island_cells = np.bincount(labels.ravel(), minlength=k + 1)[1:]
+        self.islands: np.ndarray | None = None
+        self.island_cells = np.zeros(0, dtype=np.int64)
+        if islands:
+            # components of the navigable map: the initial unexplored components (labelled once per grid)
+            labels, k = ndimage.label(self.navigable)
+            self.islands = labels.astype(np.int32) - 1  # -1 off the navigable map, 4-connected islands
+            self.island_cells = np.bincount(labels.ravel(), minlength=k + 1)[1:]
         self.pockets_filled = 0
 
     @property
@@ -291,7 +301,7 @@ class FrontierMap:
         self._stamp[:] = 0
         self._stamp_next = 1
         small = np.flatnonzero(self.island_cells * self.cell_area < self.pocket_area_m2)
-        if small.size:
+        if small.size and self.islands is not None:
             mask = np.isin(self.islands, small)
             self.explored |= mask
             self.pockets_filled = int(mask.sum())
@@ -300,6 +310,17 @@ class FrontierMap:
 
     def update(self, new_r: np.ndarray, new_c: np.ndarray) -> int:
         """Account for newly explored cells; return the number of pocket cells filled."""
+        return self._apply(new_r, new_c)
+
+    def update_navigability(self, changed_r: np.ndarray, changed_c: np.ndarray) -> int:
+        """Account for cells whose `navigable` flag the caller changed in place (e.g. a new obstacle split
+        an unexplored area into a pocket); return the number of pocket cells filled.
+
+        The same pass as for newly explored cells: pocket searches start next to (and at) every changed
+        cell and the frontier flags of the changed cells and their neighbours are recomputed."""
+        return self._apply(changed_r, changed_c)
+
+    def _apply(self, new_r: np.ndarray, new_c: np.ndarray) -> int:
         n = int(new_r.shape[0])
         if n == 0:
             return 0

@@ -1,0 +1,7 @@
+"""Top-down map code shared by the privileged experts (true map) and the modular agents (their own map):
+the explored map (view cone with exact line of sight) and incremental frontiers with the pocket rule."""
+
+from ovon.maps.frontiers import FrontierMap, Frontiers
+from ovon.maps.visibility import ExploredMap, cone_bbox, cone_params
+
+__all__ = ["ExploredMap", "FrontierMap", "Frontiers", "cone_bbox", "cone_params"]
