@@ -261,6 +261,25 @@ def test_cli_train_procedural(tmp_path: Path, table_path: str) -> None:
     assert [r["update"] for r in read_metrics(out)] == [1, 2, 3]
 
 
+def test_cli_train_resume_refuses_another_run(tmp_path: Path, table_path: str, capsys) -> None:
+    """`--resume` continues only the same run: another algorithm or model is one line naming it."""
+    from ovon.cli.main import main
+    from ovon.runfolder import FileLock
+
+    out = tmp_path / "run"
+    base = ["--preset", "tiny", "--expert", "shortest-path", "--procedural", "0", "--episodes", "3",
+            "--set", f"text_cache={table_path}", "--out", str(out)]
+    assert main(["train", "--algo", "dagger", *base]) == 0
+    capsys.readouterr()
+    assert main(["train", "--algo", "ppo", *base, "--resume"]) == 2
+    assert "algo \"dagger\" -> \"ppo\"" in capsys.readouterr().err
+    assert main(["train", "--algo", "dagger", *base, "--set", "policy.layers=3", "--resume"]) == 2
+    assert "policy.layers 1 -> 3" in capsys.readouterr().err
+    with FileLock(out / ".lock"):  # a second writer
+        assert main(["train", "--algo", "dagger", *base, "--resume"]) == 2
+        assert "in use by another ovon process" in capsys.readouterr().err
+
+
 # ----- schedule / config / CLI ------------------------------------------------------------------------
 def test_finetune_schedule_matches_baselines() -> None:
     from ovon.train.config import FinetuneConfig

@@ -6,6 +6,8 @@ import dataclasses
 import json
 from pathlib import Path
 
+from ovon.atomic import atomic_write_text
+
 
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a learned baseline (bc | dagger | ppo); works under torchrun")
@@ -64,21 +66,57 @@ def episode_list(args):
     return None
 
 
-def cmd_train(args) -> int:
+# May differ between a run and its resume: where and how fast it runs, and the budget (to train longer),
+# not what it learns from or how.
+MAY_CHANGE = ("max_updates", "total_steps", "env_workers", "checkpoint_every", "threads", "rollout_threads",
+              "device", "progress", "log_every", "keep_checkpoints", "text_cache", "inputs.data.path",
+              "inputs.scenes.path")
+
+
+def run_identity(args, cfg) -> tuple[dict, dict]:
+    """What a training run folder is: the resolved config, the algorithm, and what it reads (episodes by
+    content, the init policy by hash), so `--resume` with anything else is refused with the differences."""
     from ovon.config.base import to_dict
+    from ovon.runfolder import file_sha256, path_identity
+
+    config = {**to_dict(cfg), "cli": {"split": args.split, "episodes": args.episodes,
+                                      "procedural": args.procedural or ""}}
+    inputs: dict = {}
+    if args.data:
+        from ovon.dataset.io import EpisodeDataset
+
+        inputs["data"] = {"path": path_identity(args.data),
+                          "split": EpisodeDataset(args.data, args.split).fingerprint()}
+        inputs["scenes"] = {"path": path_identity(args.scenes)}
+    if args.init:
+        p = Path(args.init) / "policy.pt" if Path(args.init).is_dir() else Path(args.init)
+        inputs["init"] = {"sha256": file_sha256(p) if p.is_file() else str(p)}
+    return config, inputs
+
+
+def cmd_train(args) -> int:
+    import os
+
+    from ovon.config.base import to_dict
+    from ovon.runfolder import RunFolder
     from ovon.train import train
     from ovon.train.distributed import launched_by_torchrun
 
     cfg = build_config(args)
     out = Path(args.out)
-    rank0 = int(__import__("os").environ.get("RANK", "0")) == 0
-    if (out / "checkpoint.pt").exists() and not args.resume:
-        raise ValueError(f"{out} already holds a checkpoint: pass --resume to continue or choose another --out")
-    if rank0:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "config.json").write_text(json.dumps(to_dict(cfg), indent=1, default=str))
+    rank0 = int(os.environ.get("RANK", "0")) == 0
     specs = episode_list(args)
-    last = train(cfg, specs, out, resume=args.resume, init=args.init)
+    folder = None
+    if rank0:  # one writer: rank 0 holds the folder's lock for the whole run (other ranks write nothing)
+        config, inputs = run_identity(args, cfg)
+        folder = RunFolder.open(out, "train", config, inputs, resume=args.resume, may_change=MAY_CHANGE,
+                                markers=("checkpoint.pt", "policy.pt"))
+        atomic_write_text(out / "config.json", json.dumps(to_dict(cfg), indent=1, default=str))
+    try:
+        last = train(cfg, specs, out, resume=args.resume, init=args.init)
+    finally:
+        if folder is not None:
+            folder.close()
     if rank0:
         shown = {k: round(v, 4) for k, v in last.items() if isinstance(v, float)}
         print(json.dumps(shown))

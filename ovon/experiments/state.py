@@ -13,14 +13,13 @@ import hashlib
 import json
 import os
 import shlex
-import socket
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ovon.atomic import write_json
 from ovon.experiments.plan import Cell, Plan, display
+from ovon.runfolder import FileLock, RunFolderError
 
 # Options that may change between the sessions of one evaluation folder without changing an episode's
 # result (the evaluation resumes and adds what is missing), and the one that marks a training resume.
@@ -214,40 +213,14 @@ def count_lines(path: Path) -> int:
 
 
 # ----- locks -----------------------------------------------------------------------------------------
-class CellLock:
-    """An exclusive, non-blocking lock of one cell (`flock`: released by the kernel when its holder
-    dies, so a killed run never leaves a stale lock). Works across machines on a shared file system
-    that supports `flock` (local disks, NFSv4)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.fd: int | None = None
-
-    def acquire(self) -> bool:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        if fcntl is not None:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                os.close(fd)
-                return False
-        os.ftruncate(fd, 0)
-        os.write(fd, json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
-                                 "since": time.strftime("%Y-%m-%d %H:%M:%S")}).encode())
-        self.fd = fd
-        return True
-
-    def release(self) -> None:
-        if self.fd is not None:
-            os.close(self.fd)
-            self.fd = None
-
-
-def cell_lock(plan: Plan, cell: Cell) -> CellLock | None:
-    """The cell's lock, or None when another process holds it (the one place to swap the mechanism)."""
-    lock = CellLock(lock_path(plan, cell))
-    return lock if lock.acquire() else None
+def cell_lock(plan: Plan, cell: Cell) -> FileLock | None:
+    """The cell's lock (`ovon.runfolder.FileLock`: flock, released by the kernel when its holder dies, so a
+    killed run never leaves a stale lock; works across machines on a shared file system with flock), or
+    None when another process holds it."""
+    try:
+        return FileLock(lock_path(plan, cell), what="--root")
+    except RunFolderError:
+        return None
 
 
 def lock_holder(plan: Plan, cell: Cell) -> str | None:

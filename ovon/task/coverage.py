@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from ovon.experts.visibility import ExploredMap
+from ovon.maps.visibility import ExploredMap
 
 
 class Coverage:
