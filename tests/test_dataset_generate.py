@@ -81,6 +81,17 @@ def test_same_seed_gives_identical_shards_and_rerun_skips(tiny_dataset, tiny_sce
     assert {p: p.stat().st_mtime_ns for p in out.glob("*/content/*.json.gz")} == mtimes
 
 
+@pytest.mark.slow
+def test_ray_generation_gives_the_same_shards(tiny_dataset, tiny_scenes, tmp_path):
+    """The Ray executor (paper scale) writes the bytes the process pool writes."""
+    pytest.importorskip("ray")
+    out = tmp_path / "ray"
+    generate(tiny_scenes, out, tiny_generation_config(), splits=("val_seen",), workers=2, executor="ray",
+             progress=False, category_split_path=tiny_dataset / "categories.json")
+    ref = {k: v for k, v in shard_bytes(tiny_dataset).items() if k.startswith("val_seen/")}
+    assert shard_bytes(out) == ref
+
+
 def test_kill_during_generation_then_rerun_completes(tiny_dataset, tiny_scenes, tmp_path):
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "ovon.cli.main", "dataset", "generate", "--scenes", str(tiny_scenes),

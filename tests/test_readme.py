@@ -2,12 +2,14 @@
 
 The blocks run in README order in one temporary folder (so later blocks use what earlier ones made),
 shell blocks with `bash -euo pipefail`, Python blocks as scripts, with an `ovon` on PATH that runs this
-checkout. Two documented departures keep it to minutes on a 2-core machine:
+checkout. Three documented departures keep it to minutes on a 2-core machine:
 
 - SHRINK: sizes are substituted (scene counts, episodes per scene / split / run, seeds, render size,
   `--preset cpu-small` -> `tiny`, bench steps); the commands, options and code are otherwise unchanged.
 - `make <target>` lines run as `make -n <target>` (a dry run: the target exists and expands), since
   `make test` inside the test suite would run the suite recursively.
+- `python benchmarks/X.py OUT` lines run this checkout's scripts from a copy of `benchmarks/` in the temp
+  folder, so their JSON never overwrites the committed results.
 
 A Python block preceded by "Save the class below as `X.py`" is also written to `X.py`.
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -39,6 +42,7 @@ SHRINK: list[tuple[str, str]] = [
     (r"seeds=\([0-9, ]+\)", "seeds=(0,)"),
     (r"--preset cpu-small", "--preset tiny"),
     (r"(ovon sim bench[^\n]*)", r"\1 --steps 40"),
+    (r"(python benchmarks/vlfm_step.py)", r"\1 --houses 1 --episodes 1 --max-steps 40"),
 ]
 
 
@@ -134,5 +138,8 @@ def test_readme_python_env_example_runs(tmp_path):
 @pytest.mark.slow
 def test_every_readme_block_runs_as_written(tmp_path):
     env = _env(_shim(tmp_path))
+    # `python benchmarks/X.py OUT` lines run this checkout's scripts; their JSON lands in the temp copy.
+    shutil.copytree(ROOT / "benchmarks", tmp_path / "benchmarks", ignore=shutil.ignore_patterns("results"))
+    (tmp_path / "benchmarks" / "results").mkdir()
     for lang, code, before in readme_blocks(README.read_text()):
         run_block(lang, code, before, tmp_path, env, timeout=1800)

@@ -196,3 +196,36 @@ def test_kill_9_during_dataset_generate_then_rerun_is_byte_identical(tiny_scenes
                 and ".cache" not in p.parts and p.name != "generation_report.json"}
 
     assert files(out) == files(ref)
+
+
+def checkpoints_on_disk(out: Path) -> int:
+    return len(list(out.glob("snapshots/policy_*.pt")))
+
+
+def test_kill_9_during_train_then_resume_gives_the_same_losses(tmp_path):
+    """SIGKILL of `ovon train` (env workers included) between checkpoints, then `--resume`: the same
+    per-update losses and the same final weights as an uninterrupted run, no orphan workers."""
+    import torch
+
+    from ovon.train.logging import read_metrics
+
+    def cmd(out: Path) -> list[str]:
+        return [sys.executable, "-m", "ovon.cli.main", "train", "--algo", "dagger", "--preset", "tiny",
+                "--expert", "shortest-path", "--procedural", "0-1", "--episodes", "6", "--resume",
+                "--set", "max_updates=6", "--set", "env_workers=2", "--set", "keep_checkpoints=10",
+                "--set", f"text_cache={tmp_path / 'text.pt'}", "--out", str(out)]
+
+    env = {**_env(), "OMP_NUM_THREADS": "1"}
+    ref, out = tmp_path / "ref", tmp_path / "killed"
+    assert subprocess.run(cmd(ref), env=env, cwd=ROOT, capture_output=True, timeout=600).returncode == 0
+    workers = kill_and_resume(cmd(out), out, checkpoints_on_disk, [2, 4], env)
+    assert _wait_gone(workers) == []
+
+    def losses(d: Path) -> list:
+        return [(r["update"], r["loss"]) for r in read_metrics(d)]
+
+    assert losses(out) == losses(ref)
+    a = torch.load(out / "policy.pt", weights_only=True)["state_dict"]
+    b = torch.load(ref / "policy.pt", weights_only=True)["state_dict"]
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    assert not (out / ".lock").exists()
