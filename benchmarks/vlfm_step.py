@@ -67,6 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-steps", type=int, default=500)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
+    houses = [s for s in args.houses.split(",") if s]
+    if args.episodes < 1 or len(houses) * args.episodes < 2:
+        ap.error(f"--houses {args.houses!r} x --episodes {args.episodes}: expected at least 2 episodes in all "
+                 "(the first one is a warm-up and not timed); fix: raise --episodes")
     import torch
 
     torch.set_num_threads(1)

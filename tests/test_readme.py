@@ -42,7 +42,7 @@ SHRINK: list[tuple[str, str]] = [
     (r"seeds=\([0-9, ]+\)", "seeds=(0,)"),
     (r"--preset cpu-small", "--preset tiny"),
     (r"(ovon sim bench[^\n]*)", r"\1 --steps 40"),
-    (r"(python benchmarks/vlfm_step.py)", r"\1 --houses 1 --episodes 1 --max-steps 40"),
+    (r"(python benchmarks/vlfm_step.py)", r"\1 --houses 1 --episodes 2 --max-steps 40"),
 ]
 
 
