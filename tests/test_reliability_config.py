@@ -16,13 +16,16 @@ from ovon.config.task import TaskConfig
 from ovon.dataset.splits import SplitConfig
 from ovon.evaluate.harness import EvalConfig
 from ovon.models.config import ENCODER_PRESETS, POLICY_PRESETS, EncoderConfig, PolicyConfig
+from ovon.train.config import TrainConfig
 
 # The configs whose domains this session owns (train/expert configs declare theirs with the same helpers).
-OWNED = (SimConfig, TaskConfig, GenerationConfig, EncoderConfig, PolicyConfig, EvalConfig, SplitConfig)
+OWNED = (SimConfig, TaskConfig, GenerationConfig, EncoderConfig, PolicyConfig, EvalConfig, SplitConfig, TrainConfig)
 # Fields whose type is their whole domain: any finite reward, a free-form kwargs mapping.
 FREE = {"RewardConfig": {"dense_success", "dense_slack", "sparse_success", "sparse_slack", "sparse_collision",
                          "dense_failed_stop", "dense_coverage"},
-        "EvalConfig": {"agent_kwargs"}}
+        "EvalConfig": {"agent_kwargs"},
+        # paths that may not exist yet (written when absent)
+        "BCConfig": {"shards"}, "TrainConfig": {"text_cache"}}
 
 
 def _tree(cls):

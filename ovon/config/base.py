@@ -192,7 +192,14 @@ class Rule:
     expected: str
 
     def holds(self, cfg: Any) -> bool:
-        return bool(self.test(*(getattr(cfg, k) for k in self.keys)))
+        return bool(self.test(*(self.value(cfg, k) for k in self.keys)))
+
+    @staticmethod
+    def value(cfg: Any, key: str) -> Any:
+        """A key of this config or, dotted, of a nested one (`ppo.minibatches`)."""
+        for part in key.split("."):
+            cfg = getattr(cfg, part)
+        return cfg
 
 
 def less(a: str, b: str, strict: bool = True) -> Rule:
@@ -500,11 +507,11 @@ def violations(cfg: Any, where: str = "") -> list[str]:
             out.append(_violation(key, value, f, tp))
             bad_keys.add(f.name)
     for r in getattr(type(cfg), "rules", ()) or ():
-        if bad_keys.intersection(r.keys):
+        if bad_keys.intersection(k.split(".")[0] for k in r.keys):
             continue
         if not r.holds(cfg):
             prefix = f"{where}." if where else ""
-            values = ", ".join(f"{prefix}{k} = {_short(getattr(cfg, k))}" for k in r.keys)
+            values = ", ".join(f"{prefix}{k} = {_short(Rule.value(cfg, k))}" for k in r.keys)
             expected = " ".join(f"{prefix}{t}" if t in r.keys else t for t in r.expected.split(" "))
             out.append(f"{values}: expected {expected}; fix: --set the values so that {expected} holds")
     return out

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import ClassVar, Literal
 
+from ovon.config.base import Pattern, constrained, in_range, less, non_negative, positive
 from ovon.config.sim import CameraConfig, SimConfig
 from ovon.config.task import RewardConfig, TaskConfig
 from ovon.experts.config import FrontierExpertConfig, ShortestPathExpertConfig
@@ -25,13 +26,13 @@ ExpertName = Literal["frontier", "shortest-path"]
 class PPOConfig:
     """PPO (upstream values). Minibatches split the envs, so each minibatch holds whole sequences."""
 
-    epochs: int = 1
-    minibatches: int = 2
-    clip: float = 0.2
-    value_coef: float = 0.5
-    entropy_coef: float = 0.01
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
+    epochs: int = positive(1)
+    minibatches: int = positive(2)
+    clip: float = positive(0.2)
+    value_coef: float = non_negative(0.5)
+    entropy_coef: float = non_negative(0.01)
+    gamma: float = in_range(0.99, 0.0, 1.0)
+    gae_lambda: float = in_range(0.95, 0.0, 1.0)
     normalize_advantages: bool = True
 
 
@@ -44,17 +45,19 @@ class FinetuneConfig:
     from 0 to `actor_lr` at `actor_warmup_end`. The prev-action embedding stays frozen.
     """
 
-    critic_lr: float = 2.5e-4
-    critic_lr_final: float = 1.5e-5
-    critic_decay_start: int = 500
-    critic_decay_end: int = 1000
-    actor_lr: float = 1.5e-5
-    actor_unfreeze: int = 750
-    actor_warmup_end: int = 1000
+    critic_lr: float = non_negative(2.5e-4)
+    critic_lr_final: float = non_negative(1.5e-5)
+    critic_decay_start: int = non_negative(500)
+    critic_decay_end: int = non_negative(1000)
+    actor_lr: float = non_negative(1.5e-5)
+    actor_unfreeze: int = non_negative(750)
+    actor_warmup_end: int = non_negative(1000)
     freeze_prev_action: bool = True
     reinit_critic: bool = True
     reward: Literal["sparse", "dense"] = "sparse"
-    scale: float = 1.0  # multiplies every update number above
+    scale: float = positive(1.0)  # multiplies every update number above
+    rules: ClassVar = (less("critic_decay_start", "critic_decay_end", strict=False),
+                       less("actor_unfreeze", "actor_warmup_end", strict=False))
 
 
 @dataclass(frozen=True)
@@ -64,16 +67,17 @@ class DaggerConfig:
     Linear from `beta_start` to `beta_end` over `beta_updates` updates; upstream used beta = 0.
     """
 
-    beta_start: float = 0.0
-    beta_end: float = 0.0
-    beta_updates: int = 0
+    beta_start: float = in_range(0.0, 0.0, 1.0)
+    beta_end: float = in_range(0.0, 0.0, 1.0)
+    beta_updates: int = non_negative(0)
     # Dataset aggregation: keep the last `buffer_rollouts` labelled rollouts (1 = on-policy only, as
     # upstream) and take `grad_steps` optimiser steps per update, each on `sample_rollouts` of them (the
     # newest always included). On a CPU the rollout costs ~40x a gradient step, so reusing labels is
     # what makes DAgger learn in minutes.
-    buffer_rollouts: int = 1
-    grad_steps: int = 1
-    sample_rollouts: int = 1
+    buffer_rollouts: int = positive(1)
+    grad_steps: int = positive(1)
+    sample_rollouts: int = positive(1)
+    rules: ClassVar = (less("sample_rollouts", "buffer_rollouts", strict=False),)
 
 
 @dataclass(frozen=True)
@@ -81,11 +85,11 @@ class BCConfig:
     """Offline BC: record expert episodes as shards, then cross-entropy on chunks of <= context steps."""
 
     shards: str = ""  # folder of recorded shards; "" = <out>/shards (recorded when missing)
-    record_episodes: int = 1000  # episodes to record when the shards are missing
-    episodes_per_shard: int = 50
-    record_workers: int = 2
-    batch_chunks: int = 32  # chunks per update (per rank)
-    epochs: int = 10  # passes over the chunks (unless `max_updates` > 0 caps it)
+    record_episodes: int = positive(1000)  # episodes to record when the shards are missing
+    episodes_per_shard: int = positive(50)
+    record_workers: int = non_negative(2)
+    batch_chunks: int = positive(32)  # chunks per update (per rank)
+    epochs: int = positive(10)  # passes over the chunks (unless `max_updates` > 0 caps it)
 
 
 @dataclass(frozen=True)
@@ -100,38 +104,40 @@ class TrainConfig:
     shortest_path_expert: ShortestPathExpertConfig = field(default_factory=ShortestPathExpertConfig)
     # > 0: the labelling expert aims at goal viewpoints within this distance (m) of a goal object's box
     # (all viewpoints when none is), so its STOP labels come where the goal fills the view. 0 = all.
-    expert_viewpoint_radius_m: float = 0.0
+    expert_viewpoint_radius_m: float = non_negative(0.0)
     # Environments / rollouts (per rank).
-    num_envs: int = 32
-    env_workers: int = -1  # processes for the envs: -1 = one per env, 0 = in this process
-    rollout_steps: int = 100
-    scene_repeat: int = 16  # episodes sampled from a scene before an env may switch scene (world reloads)
+    num_envs: int = positive(32)
+    env_workers: int = in_range(-1, -1, None)  # processes for the envs: -1 = one per env, 0 = in this process
+    rollout_steps: int = positive(100)
+    scene_repeat: int = positive(16)  # episodes sampled from a scene before an env may switch scene (world reloads)
     # Budget: environment steps over all ranks; `max_updates` > 0 caps the number of updates instead.
-    total_steps: int = 150_000_000
-    max_updates: int = 0
+    total_steps: int = positive(150_000_000)
+    max_updates: int = non_negative(0)
     # Optimiser.
-    lr: float = 2.5e-4
-    adam_eps: float = 1e-5
-    max_grad_norm: float = 0.2
+    lr: float = positive(2.5e-4)
+    adam_eps: float = positive(1e-5)
+    max_grad_norm: float = positive(0.2)
     # Imitation (BC, DAgger): weight of the STOP class in the cross-entropy. STOP is ~1% of the labels
     # but one missing STOP turns a found goal into a failure.
-    stop_loss_weight: float = 1.0
+    stop_loss_weight: float = positive(1.0)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
     bc: BCConfig = field(default_factory=BCConfig)
     # Bookkeeping.
-    seed: int = 0
-    device: str = "auto"  # auto = cuda:<local rank> when available, else cpu
-    threads: int = 0  # torch threads of the learner's updates (0 = leave torch's default)
+    seed: int = non_negative(0)
+    # auto = cuda:<local rank> when available, else cpu
+    device: str = constrained("auto", Pattern(r"auto|cpu|cuda(:[0-9]+)?|mps", "auto, cpu, cuda, cuda:N or mps"))
+    threads: int = non_negative(0)  # torch threads of the learner's updates (0 = leave torch's default)
     # torch threads while acting during rollouts: the env workers need the cores meanwhile, and an idle
     # multi-threaded pool spins and steals their CPU (0 = same as `threads`)
-    rollout_threads: int = 1
-    log_every: int = 1  # updates
-    checkpoint_every: int = 50  # updates
-    keep_checkpoints: int = 3  # numbered policy snapshots kept besides the latest
+    rollout_threads: int = non_negative(1)
+    log_every: int = positive(1)  # updates
+    checkpoint_every: int = positive(50)  # updates
+    keep_checkpoints: int = non_negative(3)  # numbered policy snapshots kept besides the latest
     text_cache: str = ""  # .pt table {text: embedding}; "" = <out>/text_cache.pt
     progress: bool = True
+    rules: ClassVar = (less("ppo.minibatches", "num_envs", strict=False),)  # a minibatch holds whole envs
 
 
 def _paper() -> TrainConfig:
