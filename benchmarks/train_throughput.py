@@ -1,6 +1,6 @@
 """Training throughput per algorithm: environment steps/s and time of one train step.
 
-Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,dagger,ppo] [--updates 4]
+Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,dagger,dagger-overlap,ppo] [--updates 4]
        [--workers 2] [--houses 0,1] [--text hash|real] [--out benchmarks/results/train_throughput.json]
        [--baseline-rev REV --repeats 2]
 
@@ -9,7 +9,9 @@ same benchmark runs alternately in this tree and in a temporary git worktree of 
 process, `--repeats` times; the JSON then holds both medians, their ratio and the CPU seconds (process
 tree) per env step of each. Compare ratios from one run: the machine is shared and noisy.
 
-Each online algorithm (DAgger with the configured expert, PPO) runs `--updates` updates of the preset on
+`dagger-overlap` is DAgger with `dagger.overlap=true` (learning while the next rollout runs); against
+REV it is compared with REV's plain DAgger. Each online algorithm (DAgger with the configured expert,
+PPO) runs `--updates` updates of the preset on
 ad-hoc episodes in procedural houses, envs in `--workers` processes; the first update (world loading,
 numba compilation) is reported apart. Reported: env steps/s over whole updates (rollout + learning),
 rollout-only steps/s, and the learn (train-step) time. BC records `--bc-episodes` expert episodes, then
@@ -48,11 +50,14 @@ def _stats(rows: list[dict], key: str) -> float | None:
 
 
 def bench_online(algo: str, cfg, specs, root: Path) -> dict:
+    """`algo` is dagger, ppo or dagger-overlap (DAgger learning while the next rollout runs)."""
     from ovon.train import train
 
     out = root / algo
+    if algo == "dagger-overlap":
+        cfg = dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=True))
     t0 = time.perf_counter()
-    train(dataclasses.replace(cfg, algo=algo), specs, out)
+    train(dataclasses.replace(cfg, algo=algo.removesuffix("-overlap")), specs, out)
     wall = time.perf_counter() - t0
     rows = read_metrics(out)
     steady = rows[1:] or rows
@@ -100,7 +105,9 @@ def compare(args) -> None:
     base = tmp / "baseline"
     subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach", str(base), args.baseline_rev],
                    check=True, capture_output=True)
-    passthrough = ["--preset", args.preset, "--algos", args.algos, "--updates", str(args.updates),
+    algos = [a for a in args.algos.split(",") if a]
+    base_algos = ",".join(dict.fromkeys(a.removesuffix("-overlap") for a in algos))  # REV has no overlap
+    passthrough = ["--preset", args.preset, "--updates", str(args.updates),
                    "--workers", str(args.workers), "--houses", args.houses, "--expert", args.expert,
                    "--text", args.text, "--bc-episodes", str(args.bc_episodes)]
     if args.envs:
@@ -112,7 +119,8 @@ def compare(args) -> None:
                 out = tmp / f"{name}{rep}.json"
                 before = resource.getrusage(resource.RUSAGE_CHILDREN)
                 subprocess.run([sys.executable, str(root / "benchmarks" / "train_throughput.py"), *passthrough,
-                                "--out", str(out)], cwd=root, check=True, env={**os.environ, "PYTHONPATH": str(root)})
+                                "--algos", base_algos if name == "baseline" else args.algos, "--out", str(out)],
+                               cwd=root, check=True, env={**os.environ, "PYTHONPATH": str(root)})
                 after = resource.getrusage(resource.RUSAGE_CHILDREN)
                 r = json.loads(out.read_text())
                 r["cpu_s"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -126,9 +134,11 @@ def compare(args) -> None:
                      "houses": args.houses, "updates": args.updates, "load_average": os.getloadavg(),
                      "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {},
                      "runs": runs}
-    for algo in [a for a in args.algos.split(",") if a and a != "bc"]:
-        med = {n: float(np.median([r["algos"][algo]["env_steps_per_s"] for r in rs])) for n, rs in runs.items()}
-        rollout = {n: float(np.median([r["algos"][algo]["rollout_steps_per_s"] for r in rs])) for n, rs in runs.items()}
+    for algo in [a for a in algos if a != "bc"]:
+        key = {"current": algo, "baseline": algo.removesuffix("-overlap")}  # a variant vs REV's plain algo
+        med = {n: float(np.median([r["algos"][key[n]]["env_steps_per_s"] for r in rs])) for n, rs in runs.items()}
+        rollout = {n: float(np.median([r["algos"][key[n]]["rollout_steps_per_s"] for r in rs]))
+                   for n, rs in runs.items()}
         summary["algos"][algo] = {"env_steps_per_s": med, "rollout_steps_per_s": rollout,
                                   "ratio": med["current"] / med["baseline"],
                                   "rollout_ratio": rollout["current"] / rollout["baseline"]}

@@ -89,22 +89,33 @@ def test_bc_resume_reproduces_losses(tmp_path: Path) -> None:
         assert torch.equal(x, y)
 
 
-@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "ppo"])
+@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-overlap", "ppo"])
 def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
-    """Envs replay their current episode, the acting memory, the DAgger buffer and every RNG are restored."""
+    """Envs replay their current episode, the acting memory, the DAgger buffer and every RNG are restored
+    (with `dagger.overlap` also the acting copy and the learner's generator, between checkpoints that
+    leave updates learning in the background)."""
     from ovon.train import train
     from ovon.train.config import DaggerConfig
 
-    extra = {}
+    extra: dict = {}
+    n, split = 4, 2
     if algo == "dagger-aggregated":
         algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2)}
+    if algo == "dagger-overlap":
+        algo, n, split = "dagger", 7, 3
+        extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True),
+                 "checkpoint_every": 3}
     cfg = train_preset("tiny", algo=algo, expert="shortest-path", num_envs=1, rollout_steps=6,
-                       max_updates=4, text_cache=table_path, **extra)
+                       max_updates=n, text_cache=table_path, **extra)
     train(cfg, house_specs, tmp_path / "straight")
-    train(dataclasses.replace(cfg, max_updates=2), house_specs, tmp_path / "split")
+    train(dataclasses.replace(cfg, max_updates=split), house_specs, tmp_path / "split")
     train(cfg, house_specs, tmp_path / "split", resume=True)
     a, b = _losses(tmp_path / "straight"), _losses(tmp_path / "split")
-    assert len(a) == 4 and a == b
+    assert len(a) == n and a == b
+    if algo == "dagger" and cfg.dagger.overlap:  # the student acted one update stale: other data, other losses
+        on_policy = dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=False))
+        train(on_policy, house_specs, tmp_path / "on_policy")
+        assert _losses(tmp_path / "on_policy") != a
 
 
 def test_atomic_checkpoint_leaves_no_temp(tmp_path: Path) -> None:

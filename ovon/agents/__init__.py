@@ -7,12 +7,10 @@ in a worker process."""
 
 from __future__ import annotations
 
-import importlib
 import inspect
-import os
-import sys
 
 from ovon.agents.base import Agent, is_privileged
+from ovon.plugins import PluginError, is_spec, load_object
 
 BUILTIN: dict[str, str] = {
     "random": "ovon.agents.random_agent:RandomAgent",
@@ -30,35 +28,16 @@ class AgentError(ValueError):
     """The agent cannot be loaded or built; the message names the agent, the argument and the fix."""
 
 
-def _import(module_name: str):
-    try:
-        return importlib.import_module(module_name)
-    except ModuleNotFoundError as e:
-        # `ovon` (the console script) does not put the working directory on sys.path; `my_agent:MyAgent`
-        # next to the user's data should still load.
-        if e.name and module_name.split(".")[0] == e.name.split(".")[0] and os.getcwd() not in sys.path:
-            sys.path.append(os.getcwd())
-            return importlib.import_module(module_name)
-        raise
-
-
 def load_agent_class(name: str) -> type:
     fix = _FIX.format(builtin=sorted(BUILTIN))
     target = BUILTIN.get(name, name)
-    module_name, sep, cls_name = str(target).partition(":")
-    if not sep or not module_name.strip() or not cls_name.strip():
+    if not is_spec(target):
         raise AgentError(f"unknown agent {name!r}; {fix}")
     try:
-        module = _import(module_name)
-    except Exception as e:  # noqa: BLE001 - any import failure of user code is reported in one line
-        detail = " ".join(str(e).split())[:160]
-        raise AgentError(f"agent {name!r}: cannot import module {module_name!r} ({type(e).__name__}: {detail}); "
-                         f"{fix}") from None
-    obj = module
-    for part in cls_name.split("."):
-        if not hasattr(obj, part):
-            raise AgentError(f"agent {name!r}: module {module_name!r} has no attribute {cls_name!r}; {fix}")
-        obj = getattr(obj, part)
+        obj = load_object(target)
+    except PluginError as e:
+        raise AgentError(f"agent {name!r}: {e}; {fix}") from None
+    module_name, _, cls_name = str(target).partition(":")
     if not inspect.isclass(obj):
         raise AgentError(f"agent {name!r}: {module_name}:{cls_name} is a {type(obj).__name__}, not a class; {fix}")
     missing = [m for m in ("reset", "act") if not callable(getattr(obj, m, None))]

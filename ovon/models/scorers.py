@@ -13,13 +13,13 @@ Protocol: `score(observation, goal_text) -> float` (a cosine for the built-ins),
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from ovon.models.encoders.siglip import DEFAULT_SIGLIP
+from ovon.plugins import is_spec, load_class
 
 SCORERS = ("oracle-vl", "siglip", "constant")
 
@@ -142,14 +142,9 @@ def make_scorer(cfg: ScorerConfig | None = None, text_encoder=None) -> ImageText
         return SiglipScorer(cfg)
     if cfg.kind == "constant":
         return ConstantScorer(cfg)
-    if ":" in cfg.kind:
-        module, _, attr = cfg.kind.partition(":")
-        try:
-            cls = getattr(importlib.import_module(module), attr)
-        except (ImportError, AttributeError) as e:
-            raise ValueError(f"value.kind = {cfg.kind!r} cannot be loaded ({e})") from None
-        return cls(cfg)
-    raise ValueError(f"value.kind = {cfg.kind!r} is unknown; use one of {list(SCORERS)} or package.module:Class")
+    if is_spec(cfg.kind):
+        return load_class(cfg.kind, "value.scorer.kind", f"one of {list(SCORERS)} or package.module:Class")(cfg)
+    raise ValueError(f"value.scorer.kind = {cfg.kind!r} is unknown; use one of {list(SCORERS)} or package.module:Class")
 
 
 def describe_scorer(cfg: ScorerConfig) -> str:

@@ -77,6 +77,11 @@ class DaggerConfig:
     buffer_rollouts: int = positive(1)
     grad_steps: int = positive(1)
     sample_rollouts: int = positive(1)
+    # Learn while the envs step: the gradient steps of update u run in a thread during rollout u+1, which
+    # acts with the weights of update u-1 (one update staler than on-policy DAgger; deterministic, since
+    # the schedule, not the timing, decides which weights act). On a small CPU the learner uses a core
+    # the env workers leave idle. One process only (not under torchrun).
+    overlap: bool = False
     rules: ClassVar = (less("sample_rollouts", "buffer_rollouts", strict=False),)
 
 

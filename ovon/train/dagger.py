@@ -12,7 +12,9 @@ on a CPU); with `dagger.beta_*` > 0 the expert's own action drives the env with 
 
 from __future__ import annotations
 
+import copy
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -38,12 +40,20 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
     """Run DAgger; returns the last logged metrics. `init` starts from an IL/RL `policy.pt`."""
     run = TrainRun(cfg, out_dir, "dagger", init=init, resume=resume)
     cfg, dev = run.cfg, run.device
+    overlap = cfg.dagger.overlap
+    if overlap and run.info.world_size > 1:
+        raise ValueError("dagger.overlap=true runs in one process; fix: --set dagger.overlap=false under torchrun")
+    pool = ThreadPoolExecutor(1, thread_name_prefix="dagger-learn") if overlap else None
     try:
         envs, batch = run.open_envs(specs, reward_for(cfg, False), label=True)
         policy = run.build_policy(int(batch.image.shape[-1]) if isinstance(batch.image, torch.Tensor) else 0,
                                   int(batch.goal.shape[-1]))
         model = dist.wrap(policy, run.info)
         optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
+        # With overlap the student acts with its own copy (the weights of the update before last) and the
+        # learner draws its minibatches from its own generator, so acting and learning never race.
+        actor = copy.deepcopy(policy) if overlap else policy
+        learn_rng = torch.Generator().manual_seed(cfg.seed * 7919 + 1) if overlap else None
         n_envs, T = cfg.num_envs, cfg.rollout_steps
         act_state = policy.init_state(n_envs, dev)
         prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
@@ -53,24 +63,66 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
             act_state, prev_action = saved["act_state"], saved["prev_action"].to(dev)
             buffer = list(saved.get("buffer", []))
             batch = envs.set_state(saved["env"])
+            if overlap:
+                actor.load_state_dict(saved["actor"])
+                learn_rng.set_state(saved["learn_rng"])
             run.restore_rng(saved)
         total = num_updates(cfg, run.info.world_size)
         run.open_logger(total)
+
+        def learn(data: list[tuple]) -> dict:
+            """`grad_steps` cross-entropy steps on the expert's labels over (num_envs, T) chunks."""
+            t = time.perf_counter()
+            policy.train()
+            losses, accs, grad_norm = [], [], 0.0
+            for _ in range(cfg.dagger.grad_steps):
+                picks = [len(data) - 1]  # the newest rollout, plus random older ones
+                older = torch.randperm(len(data) - 1, generator=learn_rng)[: cfg.dagger.sample_rollouts - 1]
+                parts = [data[i] for i in picks + older.tolist()]
+                img = map_images(cat_images([p[0] for p in parts]), lambda x: x.to(dev))  # (N, T, ...)
+                obs = policy.make_obs(features(policy, img), torch.cat([p[1] for p in parts]).to(dev))
+                logits, values = model(obs, torch.cat([p[2] for p in parts]).to(dev),
+                                       torch.cat([p[3] for p in parts]).to(dev))
+                target = torch.cat([p[4] for p in parts]).to(dev)
+                valid = target >= 0
+                loss = imitation_loss(logits, target, cfg.stop_loss_weight) + 0.0 * values.sum()  # DDP sees critic
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                grad_norm = float(torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm))
+                optimizer.step()
+                losses.append(loss.item())
+                accs.append((logits[valid].argmax(-1) == target[valid]).float().mean().item())
+            return {"loss": float(np.mean(losses)), "accuracy": float(np.mean(accs)), "grad_norm": grad_norm,
+                    "time/learn_s": time.perf_counter() - t}
+
         last: dict = {}
+        pending = None  # overlap: (update, future of its learning, its rollout record)
+
+        def finish(u: int, learned: dict, record: dict) -> None:
+            """Log update `u` (0-based) once its learning is done."""
+            nonlocal last
+            scalars = dist.all_reduce_mean({**learned, "time/rollout_s": record["rollout_s"]}, run.info)
+            eps = [m for part in dist.gather_objects(record["finished"], run.info) for m in part]
+            if run.due(u + 1, total, cfg.log_every):
+                last = {**scalars, **episode_summary(eps), "beta": record["beta"],
+                        "steps_per_s": n_envs * T * run.info.world_size / max(record["wall_s"], 1e-9)}
+                run.log(u + 1, last, step=record["step"])
+
+        t_prev = time.perf_counter()
         for update in range(run.start_update, total):
             t0 = time.perf_counter()
             beta = beta_at(cfg, update)
             images, goals, prevs, starts, labels, finished = [], [], [], [], [], []
             # ---- rollout: the student acts, the expert labels -------------------------------------
-            policy.eval()
+            actor.eval()
             with run.acting():
                 for _ in range(T):
                     b = batch
                     with torch.no_grad():
-                        obs = policy.make_obs(features(policy, map_images(b.image, lambda x: x.to(dev))),
-                                              b.goal.to(dev))
-                        logits, _, act_state = policy.act_step(obs, prev_action, act_state, b.first.to(dev))
-                        action = policy.distribution(logits).sample()
+                        obs = actor.make_obs(features(actor, map_images(b.image, lambda x: x.to(dev))),
+                                             b.goal.to(dev))
+                        logits, _, act_state = actor.act_step(obs, prev_action, act_state, b.first.to(dev))
+                        action = actor.distribution(logits).sample()
                         if beta > 0:
                             use_expert = torch.rand(n_envs, device=dev) < beta
                             action = torch.where(use_expert, b.label.to(dev), action)
@@ -83,44 +135,47 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                     prev_action = torch.where(batch.first.to(dev), torch.full_like(action, -1), action)
                     finished += batch.metrics
             t1 = time.perf_counter()
-            # ---- learn: cross-entropy on the expert's labels over (num_envs, T) chunks -----------------
             buffer.append((_compact(stack_images(images, 1)), torch.stack(goals, 1), torch.stack(prevs, 1),
                            torch.stack(starts, 1), torch.stack(labels, 1)))
             del buffer[: max(0, len(buffer) - cfg.dagger.buffer_rollouts)]
-            policy.train()
-            losses, accs = [], []
-            for _ in range(cfg.dagger.grad_steps):
-                picks = [len(buffer) - 1]  # the newest rollout, plus random older ones
-                older = torch.randperm(len(buffer) - 1)[: cfg.dagger.sample_rollouts - 1].tolist()
-                parts = [buffer[i] for i in picks + older]
-                img = map_images(cat_images([p[0] for p in parts]), lambda x: x.to(dev))  # (N, T, ...)
-                obs = policy.make_obs(features(policy, img), torch.cat([p[1] for p in parts]).to(dev))
-                logits, values = model(obs, torch.cat([p[2] for p in parts]).to(dev),
-                                       torch.cat([p[3] for p in parts]).to(dev))
-                target = torch.cat([p[4] for p in parts]).to(dev)
-                valid = target >= 0
-                loss = imitation_loss(logits, target, cfg.stop_loss_weight) + 0.0 * values.sum()  # DDP sees critic
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)
-                optimizer.step()
-                losses.append(loss.item())
-                accs.append((logits[valid].argmax(-1) == target[valid]).float().mean().item())
-            t2 = time.perf_counter()
             run.step += n_envs * T * run.info.world_size
-            scalars = dist.all_reduce_mean({"loss": float(np.mean(losses)), "accuracy": float(np.mean(accs)),
-                                            "grad_norm": float(grad_norm), "time/rollout_s": t1 - t0,
-                                            "time/learn_s": t2 - t1}, run.info)
-            eps = [m for part in dist.gather_objects(finished, run.info) for m in part]
-            if run.due(update + 1, total, cfg.log_every):
-                last = {**scalars, **episode_summary(eps), "beta": beta,
-                        "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
-                run.log(update + 1, last)
-            if run.due(update + 1, total, cfg.checkpoint_every):
-                run.save(update + 1, optimizer, {"env": envs.get_state(), "act_state": act_state,
-                                                 "prev_action": prev_action.cpu(), "buffer": buffer})
+            record = {"beta": beta, "finished": finished, "rollout_s": t1 - t0, "step": run.step}
+            # ---- learn: now, or (overlap) in the thread while the next rollout runs ---------------------
+            checkpoint = run.due(update + 1, total, cfg.checkpoint_every)
+            if overlap:
+                if pending is not None:
+                    u, future, rec = pending
+                    learned = future.result()
+                    rec["wall_s"] = time.perf_counter() - t_prev
+                    t_prev = time.perf_counter()
+                    finish(u, learned, rec)
+                    pending = None
+                actor.load_state_dict(policy.state_dict())  # the weights after the previous update
+                if checkpoint:  # a checkpoint holds a finished update, so learn this one now
+                    learned = learn(list(buffer))
+                    record["wall_s"] = time.perf_counter() - t_prev
+                    t_prev = time.perf_counter()
+                    finish(update, learned, record)
+                else:
+                    pending = (update, pool.submit(learn, list(buffer)), record)
+            else:
+                learned = learn(buffer)
+                record["wall_s"] = time.perf_counter() - t0
+                finish(update, learned, record)
+            if checkpoint:
+                state = {"env": envs.get_state(), "act_state": act_state, "prev_action": prev_action.cpu(),
+                         "buffer": buffer}
+                if overlap:
+                    state |= {"actor": actor.state_dict(), "learn_rng": learn_rng.get_state()}
+                run.save(update + 1, optimizer, state)
+        if pending is not None:  # (the last update always checkpoints; kept for clarity)
+            u, future, rec = pending
+            rec["wall_s"] = time.perf_counter() - t_prev
+            finish(u, future.result(), rec)
         run.finish(total)
     finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
         run.close()
     return last
 

@@ -142,9 +142,10 @@ class TrainRun:
                                 self.start_update, self.step)
         return self.logger
 
-    def log(self, update: int, metrics: dict) -> None:
+    def log(self, update: int, metrics: dict, step: int | None = None) -> None:
+        """Log `update` (1-based) at env step `step` (default: the run's current step)."""
         assert self.logger is not None
-        self.logger.log(update, self.step, metrics)
+        self.logger.log(update, self.step if step is None else step, metrics)
 
     def save(self, update: int, optimizer, rank_state: dict) -> None:
         """Gather every rank's state (RNG, envs, acting memory) and let rank 0 write checkpoint + policy."""

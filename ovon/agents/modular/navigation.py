@@ -16,7 +16,6 @@ Implementations (`NavigatorConfig.kind`): "geometric" (default), or "package.mod
 
 from __future__ import annotations
 
-import importlib
 import math
 from dataclasses import dataclass
 from typing import Literal, Protocol, runtime_checkable
@@ -35,6 +34,7 @@ from ovon.experts.control import (
     lookahead_index,
     trace_parents,
 )
+from ovon.plugins import is_spec, load_class
 
 
 @dataclass
@@ -208,11 +208,6 @@ class GeometricNavigator:
 def make_navigator(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors) -> PointGoalNavigator:
     if cfg.kind == "geometric":
         return GeometricNavigator(cfg, maps, sensors)
-    if ":" in cfg.kind:
-        module, _, attr = cfg.kind.partition(":")
-        try:
-            cls = getattr(importlib.import_module(module), attr)
-        except (ImportError, AttributeError) as e:
-            raise ValueError(f"navigator.kind = {cfg.kind!r} cannot be loaded ({e})") from None
-        return cls(cfg, maps, sensors)
+    if is_spec(cfg.kind):
+        return load_class(cfg.kind, "navigator.kind", "geometric or package.module:Class")(cfg, maps, sensors)
     raise ValueError(f"navigator.kind = {cfg.kind!r} is unknown; use geometric or package.module:Class")

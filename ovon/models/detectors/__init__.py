@@ -4,10 +4,9 @@ frame through the privileged channel) and "owlv2" (the paper's open-vocabulary d
 
 from __future__ import annotations
 
-import importlib
-
 from ovon.models.detectors.base import Detection, Detector, box_of
 from ovon.models.detectors.config import DETECTOR_PRESETS, DetectorConfig, detector_preset
+from ovon.plugins import is_spec, load_class
 
 DETECTORS = ("oracle", "owlv2")
 
@@ -22,13 +21,8 @@ def make_detector(cfg: DetectorConfig | None = None, text_encoder=None) -> Detec
         from ovon.models.detectors.owlv2 import OWLv2Detector
 
         return OWLv2Detector(cfg)
-    if ":" in cfg.kind:
-        module, _, attr = cfg.kind.partition(":")
-        try:
-            cls = getattr(importlib.import_module(module), attr)
-        except (ImportError, AttributeError) as e:
-            raise ValueError(f"detector.kind = {cfg.kind!r} cannot be loaded ({e})") from None
-        return cls(cfg)
+    if is_spec(cfg.kind):
+        return load_class(cfg.kind, "detector.kind", f"one of {list(DETECTORS)} or package.module:Class")(cfg)
     raise ValueError(f"detector.kind = {cfg.kind!r} is unknown; use one of {list(DETECTORS)} or package.module:Class")
 
 
