@@ -204,3 +204,29 @@ def test_fuzz_evaluate_arguments(tiny_dataset, tiny_scenes, tmp_path_factory, ca
             assert summary["splits"][split]["episodes"] == min(int(float(episodes)), available) * n_seeds
     else:
         assert_one_line_error(rc, err)
+
+
+@pytest.mark.parametrize("args,needle", [(["--hfov", "180"], "--hfov = 180.0"), (["--width", "0"], "--width = 0"),
+                                         (["--hfov", "0"], "--hfov = 0.0")])
+def test_sim_camera_options_use_the_camera_domains(tmp_path, capsys, args, needle):
+    from ovon.cli.main import main
+
+    assert main(["sim", "view", "procedural:3", *args, "--out", str(tmp_path / "v.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0] and "fix:" in err[0]
+    assert not (tmp_path / "v.png").exists()
+
+
+def test_train_resume_from_a_torn_checkpoint_is_one_line(tmp_path, capsys):
+    from ovon.cli.main import main
+
+    out = tmp_path / "run"
+    args = ["train", "--algo", "dagger", "--preset", "tiny", "--procedural", "0", "--episodes", "2",
+            "--expert", "shortest-path", "--out", str(out)]
+    assert main(args) == 0
+    ckpt = out / "checkpoint.pt"
+    ckpt.write_bytes(ckpt.read_bytes()[: ckpt.stat().st_size // 2])
+    capsys.readouterr()
+    assert main([*args, "--resume"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "checkpoint.pt is not a readable training checkpoint" in err[0] and "fix:" in err[0]

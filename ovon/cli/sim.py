@@ -48,15 +48,26 @@ def register(sub) -> None:
     b.set_defaults(func=cmd_bench)
 
 
+CAMERA_OPTIONS = {"width": "--width", "height": "--height", "hfov_deg": "--hfov", "backend": "--backend"}
+
+
 def _camera(args):
+    """The camera options through `CameraConfig`'s declared domains (`--hfov 180` is refused like
+    `--set sim.camera.hfov_deg=180`), the message naming the options."""
+    from ovon.config.base import ConfigError, from_dict
     from ovon.config.sim import CameraConfig
 
-    cam = CameraConfig(width=args.width, height=args.height, backend=args.backend)
+    data = {"width": args.width, "height": args.height, "backend": args.backend}
     if args.hfov is not None:
-        cam = CameraConfig(width=args.width, height=args.height, hfov_deg=args.hfov, backend=args.backend)
-    if cam.width < 1 or cam.height < 1:
-        raise ValueError(f"--width/--height must be positive, got {cam.width}x{cam.height}")
-    return cam
+        data["hfov_deg"] = args.hfov
+    try:
+        return from_dict(CameraConfig, data)
+    except ConfigError as e:
+        msg = str(e)
+        for key, option in CAMERA_OPTIONS.items():
+            msg = msg.replace(f"--set {key}=VALUE with VALUE", f"pass {option} with")
+            msg = msg.replace(f"{key} = ", f"{option} = ")
+        raise ConfigError(msg) from None
 
 
 def _parse_pose(text: str) -> tuple[np.ndarray, float]:

@@ -63,8 +63,13 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if not path.is_file():
         raise FileNotFoundError(f"no training checkpoint at {path}")
     # Our own file: it pickles RNG states and acting-state dataclasses, so weights_only cannot hold it.
-    ckpt = torch.load(path, map_location=map_location, weights_only=False)
-    if ckpt.get("format") != FORMAT:
+    try:
+        ckpt = torch.load(path, map_location=map_location, weights_only=False)
+    except Exception as e:  # noqa: BLE001 - torch raises many types for a torn or foreign file
+        detail = " ".join(str(e).split())[:100]
+        raise ValueError(f"{path} is not a readable training checkpoint ({type(e).__name__}: {detail}); fix: restore "
+                         "it, or delete it (and policy.pt) to start the run over") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path} is not an ovon training checkpoint ({FORMAT})")
     return ckpt
 
