@@ -34,6 +34,10 @@ class PPOConfig:
     gamma: float = in_range(0.99, 0.0, 1.0)
     gae_lambda: float = in_range(0.95, 0.0, 1.0)
     normalize_advantages: bool = True
+    # The policy PPO acts with and optimises is softmax(logits / temperature). A fine-tune of an imitation
+    # policy that is evaluated at temperature 0.5 (README) should be trained at 0.5 too: at 1 its rollouts
+    # rarely succeed, the sparse reward gives no signal and the policy drifts away from what worked.
+    temperature: float = positive(1.0)
 
 
 @dataclass(frozen=True)

@@ -116,7 +116,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                         obs = policy.make_obs(features(policy, map_images(b.image, lambda x: x.to(dev))),
                                               b.goal.to(dev))
                         logits, _, act_state = policy.act_step(obs, prev_action, act_state, b.first.to(dev))
-                        action = policy.distribution(logits).sample()
+                        action = policy.distribution(logits / pc.temperature).sample()
                     actions.append(action.cpu())
                     batch = envs.step(action.cpu())
                     rewards.append(batch.reward)
@@ -135,7 +135,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             with torch.no_grad():
                 obs = policy.make_obs(features(policy, img), goal_seq)
                 logits, values, _ = policy.forward_seq(obs, prev_seq, start_seq, state0)
-                old_logp = policy.distribution(logits[:, :T]).log_prob(act_seq)
+                old_logp = policy.distribution(logits[:, :T] / pc.temperature).log_prob(act_seq)
                 adv = torch.zeros_like(rew)
                 gae = torch.zeros(n_envs, device=dev)
                 for t in reversed(range(T)):
@@ -156,7 +156,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                     mb_img = map_images(img, lambda x, i=mbd: x[i, :T])
                     obs = policy.make_obs(features(policy, mb_img), goal_seq[mbd, :T])
                     logits, v = model(obs, prev_seq[mbd, :T], start_seq[mbd, :T], _index_state(state0, mbd))
-                    d = policy.distribution(logits)
+                    d = policy.distribution(logits / pc.temperature)
                     logp = d.log_prob(act_seq[mbd])
                     ratio = (logp - old_logp[mbd]).exp()
                     a = adv[mbd]
