@@ -30,7 +30,8 @@ def register(sub) -> None:
     p.add_argument("--splits", default="val_seen,val_seen_synonyms,val_unseen")
     p.add_argument("--seeds", default="0", help="comma-separated, e.g. 0,1,2")
     p.add_argument("--episodes", default=None, help="episodes per split (default: all)")
-    p.add_argument("--noise", default="", help="e.g. actuation,odometry or actuation:movebase*0.5")
+    p.add_argument("--noise", default="", help="e.g. actuation,odometry, actuation:movebase*0.5 or odometry:drift "
+                   "(default odometry: bounded per reading)")
     p.add_argument("--preset", choices=["auto", "cpu", "paper"], default="auto",
                    help="cpu: 160x120 frames; paper: the 360x640 Stretch camera; auto: the camera a policy "
                         "checkpoint was trained with, else cpu")

@@ -59,6 +59,8 @@ class NoiseConfig:
     actuation: Literal["none", "gaussian", "ilqr", "proportional", "movebase"] = "none"
     actuation_multiplier: float = in_range(1.0, 0.0, 100.0)
     odometry: bool = False
+    # bounded: a fresh error on each reading (the paper); drift: errors integrated by dead reckoning
+    odometry_mode: Literal["bounded", "drift"] = "bounded"
     odometry_position_m: float = non_negative(0.007)
     odometry_heading_deg: float = non_negative(2.0)
 

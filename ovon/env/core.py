@@ -83,7 +83,7 @@ class ObjectNavEnv(gym.Env):
         self._world: World | None = None
         self._actuation = ActuationNoise.from_name(sim.noise.actuation, sim.noise.actuation_multiplier)
         odo = OdometryNoise(sim.noise.odometry_position_m, sim.noise.odometry_heading_deg)
-        self._odometry = Odometry(odo if sim.noise.odometry else None)
+        self._odometry = Odometry(odo if sim.noise.odometry else None, sim.noise.odometry_mode)
         self.observation_space = spaces.Dict(observation_spaces(sim))
         self.action_space = spaces.Discrete(6)
         self.spec_episode: EpisodeSpec | None = None

@@ -63,13 +63,15 @@ class EvalConfig:
 
 
 def parse_noise(spec: str | None) -> NoiseConfig:
-    """`actuation,odometry`, `actuation:movebase`, `actuation:ilqr*2` (multiplier) or empty."""
+    """`actuation,odometry`, `actuation:movebase`, `actuation:ilqr*2` (multiplier), `odometry:drift`
+    (dead-reckoning drift instead of the paper's bounded per-reading error) or empty."""
     from ovon.config.base import ConfigError
 
     cfg = NoiseConfig()
     if not spec:
         return cfg
     models = typing.get_args(typing.get_type_hints(NoiseConfig)["actuation"])
+    odo_modes = typing.get_args(typing.get_type_hints(NoiseConfig)["odometry_mode"])
     fix = "fix: use e.g. --noise actuation,odometry or --noise actuation:movebase*0.5"
     for item in [s.strip() for s in spec.split(",") if s.strip()]:
         name, _, arg = item.partition(":")
@@ -85,11 +87,11 @@ def parse_noise(spec: str | None) -> NoiseConfig:
             cfg = dataclasses.replace(cfg, actuation=model, actuation_multiplier=k)
             if not 0 <= k <= 100:
                 raise ConfigError(f"--noise {item!r}: multiplier {k:g} is outside [0, 100]; {fix}")
-        elif name == "odometry" and not arg:
-            cfg = dataclasses.replace(cfg, odometry=True)
+        elif name == "odometry" and arg in ("",) + odo_modes:
+            cfg = dataclasses.replace(cfg, odometry=True, odometry_mode=arg or "bounded")
         else:
             raise ConfigError(f"--noise: unknown noise {item!r}, expected actuation[:ilqr|proportional|movebase|"
-                              f"gaussian][*k] or odometry; {fix}")
+                              f"gaussian][*k] or odometry[:bounded|drift]; {fix}")
     return validate(cfg, "sim.noise")
 
 

@@ -107,11 +107,21 @@ class Kinematics:
 
 
 class Odometry:
-    """Pose relative to the start (dx, dz in the start frame, dyaw), optionally with per-step noise that
-    accumulates like real wheel odometry drift; the true pose is never changed by it."""
+    """Pose relative to the start (forward, left, dyaw in the start frame); the true pose is never changed.
 
-    def __init__(self, noise: OdometryNoise | None = None):
+    `mode="bounded"` (the paper's model, arXiv 2409.14296 Sec. "noise"): every reading is the true relative
+    pose plus a fresh uniform error, so the error never exceeds the noise bounds. `mode="drift"`: dead
+    reckoning, each step's body-frame motion (forward, left, turn) plus the error is integrated along the
+    *estimated* heading, so heading error bends every later translation, as real wheel odometry drifts.
+    """
+
+    MODES = ("bounded", "drift")
+
+    def __init__(self, noise: OdometryNoise | None = None, mode: str = "bounded"):
+        if mode not in self.MODES:
+            raise ValueError(f"odometry mode {mode!r}: expected one of {', '.join(self.MODES)}")
         self.noise = noise
+        self.mode = mode
         self._start: AgentState | None = None
         self._prev_true: AgentState | None = None
         self._estimate = np.zeros(3)
@@ -134,13 +144,29 @@ class Odometry:
 
     def update(self, state: AgentState, rng: np.random.Generator | None = None) -> np.ndarray:
         assert self._prev_true is not None
-        true_now = self.relative(state)
-        true_prev = self.relative(self._prev_true)
-        step = true_now - true_prev
-        step[2] = wrap_angle(step[2])
-        if self.noise is not None and rng is not None and np.any(step != 0):
-            step = step + self.noise.sample(rng)
-        self._estimate = self._estimate + step
+        noisy = self.noise is not None and rng is not None
+        if self.mode == "bounded":
+            self._estimate = self.relative(state)
+            if noisy:
+                self._estimate = self._estimate + self.noise.sample(rng)
+        else:
+            self._estimate = self._dead_reckon(state, rng if noisy else None)
         self._estimate[2] = wrap_angle(self._estimate[2])
         self._prev_true = state.copy()
         return self._estimate.copy()
+
+    def _dead_reckon(self, state: AgentState, rng: np.random.Generator | None) -> np.ndarray:
+        """Integrate the true step, measured in the agent's previous body frame, along the estimated heading."""
+        prev = self._prev_true
+        d = state.position - prev.position
+        f = heading_vector(prev.yaw)
+        left = np.array([f[2], 0.0, -f[0]])
+        step = np.array([float(d @ f), float(d @ left), wrap_angle(state.yaw - prev.yaw)])
+        if rng is not None and np.any(step != 0):
+            step = step + self.noise.sample(rng)
+        est = self._estimate.copy()
+        c, s = math.cos(est[2]), math.sin(est[2])  # body frame -> start frame (forward, left)
+        est[0] += c * step[0] - s * step[1]
+        est[1] += s * step[0] + c * step[1]
+        est[2] += step[2]
+        return est
