@@ -38,6 +38,11 @@ class PPOConfig:
     # policy that is evaluated at temperature 0.5 (README) should be trained at 0.5 too: at 1 its rollouts
     # rarely succeed, the sparse reward gives no signal and the policy drifts away from what worked.
     temperature: float = positive(1.0)
+    # A transformer acts with a sliding window of `policy.context` steps that crosses rollout chunks; the
+    # update re-reads each chunk with the `context - 1` steps before it (no loss on them), so the logits it
+    # optimises are the ones the actions were sampled from. false: the chunk alone (shorter context for
+    # episodes that began before it; the update then optimises another policy than the one that acted).
+    context_prefix: bool = True
 
 
 @dataclass(frozen=True)
@@ -59,7 +64,16 @@ class FinetuneConfig:
     freeze_prev_action: bool = True
     reinit_critic: bool = True
     reward: Literal["sparse", "dense"] = "sparse"
-    scale: float = positive(1.0)  # multiplies every update number above
+    scale: float = positive(1.0)  # multiplies every update number above and below
+    # What keeps the imitation policy while RL takes over (kickstarting / DAPG): a loss term
+    # anchor_coef x (cross-entropy to the expert's online labels | KL(initial policy || policy)),
+    # its weight decaying linearly to 0 over `anchor_decay_updates` (0: constant).
+    anchor: Literal["none", "expert", "kl"] = "none"
+    anchor_coef: float = non_negative(1.0)
+    anchor_decay_updates: int = non_negative(0)
+    # The actor stays frozen (beyond `actor_unfreeze`) until the critic's explained variance on a
+    # rollout reaches this; once reached the gate stays open. 0: no gate.
+    critic_warmup_ev: float = in_range(0.0, 0.0, 1.0, hi_open=True)
     rules: ClassVar = (less("critic_decay_start", "critic_decay_end", strict=False),
                        less("actor_unfreeze", "actor_warmup_end", strict=False))
 
