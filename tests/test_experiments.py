@@ -53,7 +53,7 @@ def test_every_definition_resolves_at_every_scale(scale: str, tmp_path: Path) ->
     plan = resolve(all_experiments(), scale, tmp_path)
     trains = {c.name: c for c in plan.cells.values() if c.kind == "train"}
     evals = {c.name: c for c in plan.cells.values() if c.kind == "eval"}
-    assert len(trains) == 14 and len(evals) == 18
+    assert len(trains) == 14 and len(evals) == 20
     recipes = load_catalogue().recipes
     for name, cell in trains.items():
         assert isinstance(cell.train_cfg, TrainConfig), name
