@@ -52,6 +52,9 @@ class NavConfig:
     cell_height: float = in_range(0.05, 0.01, 1.0)
     max_slope_deg: float = in_range(30.0, 0.0, 90.0, hi_open=True)
     floor_separation: float = positive(1.0)  # walkable surfaces more than this apart in y are separate floors
+    # Where navigability comes from: the habitat navmesh beside the mesh (<id>.navmesh or <id>.basis.navmesh),
+    # the mesh itself, or auto = the navmesh when the scene has one.
+    source: Literal["auto", "navmesh", "mesh"] = "auto"
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,7 @@ many annotated objects survived label cleaning)."""
 from __future__ import annotations
 
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -62,6 +63,7 @@ def navigation_summary(scene: Scene, agent=None, nav=None) -> list[dict[str, Any
             "islands": g.num_islands,
             "start_area_m2": round(float(g.island_area[big].sum()), 2),
             "narrow_removed_m2": round(float(getattr(g, "narrow", np.zeros(1, bool)).sum()) * cell, 2),
+            "source": getattr(sn, "source", "mesh"),
         })  # fmt: skip
     return out
 
@@ -98,7 +100,8 @@ def print_summary(summary: dict[str, Any], console: Any = None, max_categories: 
     for f in summary.get("navigation", []):
         over.add_row(f"floor {f['floor']} navigable", f"{f['navigable_m2']:.1f} m² at y={f['height']:.2f} in "
                      f"{f['islands']} islands; {f['start_area_m2']:.1f} m² on islands big enough for starts; "
-                     f"{f['narrow_removed_m2']:.1f} m² of strips too narrow to drive removed")
+                     f"{f['narrow_removed_m2']:.1f} m² of strips too narrow to drive removed"
+                     + (f" (from {Path(f['source']).name})" if f.get("source", "mesh") != "mesh" else ""))
     console.print(over)
 
     if summary["rooms"]:

@@ -4,8 +4,9 @@ optional sliding, actuation noise, and odometry relative to the start pose.
 Collision model: forward motion is checked against the navigable (radius-eroded) grid by sampling the
 segment at half-cell steps (`ovon.sim.collision.free_prefix`, shared with the experts). Without sliding
 the agent stops at the last navigable sample before the obstacle (Habitat's `tryStepNoSliding` stops at
-the contact too); with sliding the remaining motion is projected onto the x or z axis, whichever
-progresses further (a grid approximation of sliding along the navmesh edge).
+the contact too); with sliding the agent ends at the navigable point nearest to the target among the
+cells it can reach around the move (`ovon.sim.collision.slide_point`, Detour's moveAlongSurface on the
+grid: the target projected onto the wall it hits).
 Either way the step reports `collided=True`.
 """
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from ovon.config.sim import AgentConfig
 from ovon.geometry import heading_vector, wrap_angle
-from ovon.sim.collision import forward_delta, free_prefix
+from ovon.sim.collision import forward_delta, free_prefix, slide_point
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState
 
@@ -91,13 +92,10 @@ class Kinematics:
     def _move(self, start: np.ndarray, dx: float, dz: float) -> tuple[np.ndarray, bool]:
         reached, free = self._free_prefix(start, dx, dz)
         if not free and self.cfg.allow_sliding:
-            rest = (start[0] + dx - reached[0], start[2] + dz - reached[2])
-            best = reached
-            for slide in ((rest[0], 0.0), (0.0, rest[1])):
-                cand, _ = self._free_prefix(reached, slide[0], slide[1])
-                if np.linalg.norm(cand - reached) > np.linalg.norm(best - reached):
-                    best = cand
-            reached = best
+            g = self.grid
+            px, pz = slide_point(self._navigable, float(g.origin[0]), float(g.origin[1]), float(g.cell_size),
+                                 float(start[0]), float(start[2]), dx, dz)
+            reached = np.array([px, start[1], pz], dtype=np.float64)
         out = reached
         r, c = self.grid.world_to_cell(out)
         h = float(self.grid.heights[r, c])
