@@ -1,7 +1,7 @@
 """Resolve experiment definitions at a scale into cells with their exact `ovon` commands.
 
 Why the exact commands: the runner executes them, `--dry-run` prints them, and validation parses them
-with the real `ovon` argument parser and builds the real `TrainConfig` (`ovon.cli.train.build_config`),
+with the real `ovon` argument parser and builds the real `TrainConfig` (`ovon.train.config.build_config`),
 so a definition that resolves here is one the commands accept. Layout under `<root>/<scale>/`:
 `data/` (generated scenes + episodes), `train/<cell>/`, `eval/<cell>/`, `cells/` (the runner's records),
 `locks/`, `logs/`, `reports/`.
@@ -308,7 +308,7 @@ def parse_cli(argv: list[str], where: str):
 
 def build_train_config(argv: list[str], where: str):
     """The `TrainConfig` that `ovon train` builds from `argv` (presets, --set and their validation)."""
-    from ovon.cli.train import build_config
+    from ovon.train.config import build_config
 
     args = parse_cli(argv, where)
     try:
