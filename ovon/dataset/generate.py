@@ -89,15 +89,17 @@ def _r(v, nd: int) -> list[float]:
 
 
 # -- phase 1: goals of one scene ----------------------------------------------------------------
-def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str]) -> dict:
-    """{category: [goal dict]} for the scene plus the reasons objects were not goals."""
+def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str],
+                  nav_cache: Path | None = None) -> dict:
+    """{category: [goal dict]} for the scene plus the reasons objects were not goals (`nav_cache`: the
+    folder of the on-disk navigation-grid cache, shared with phase 2)."""
     from ovon.dataset.viewpoints import object_viewpoints
     from ovon.sim.navgrid import build_navigation
     from ovon.sim.render import make_renderer
     from ovon.sim.world import load_scene_any
 
     scene = load_scene_any(ref.folder)
-    nav = build_navigation(scene, AgentConfig(), NavConfig())
+    nav = build_navigation(scene, AgentConfig(), NavConfig(), cache_dir=nav_cache)
     vc = cfg.viewpoints
     cam = CameraConfig(width=vc.render_size, height=vc.render_size, hfov_deg=vc.hfov_deg,
                        camera_height=vc.camera_height, backend=vc.backend)  # type: ignore[arg-type]
@@ -148,9 +150,8 @@ def goals_job(job: dict) -> dict:
     path = _goal_cache_path(out, ref)
     if path.exists():
         return {"stem": ref.stem, "cached": True}
-    _nav_cache(out)
     t0 = time.perf_counter()
-    res = compute_goals(ref, from_dict(GenerationConfig, job["cfg"]), job["categories"])
+    res = compute_goals(ref, from_dict(GenerationConfig, job["cfg"]), job["categories"], _nav_cache(out))
     res["seconds"] = round(time.perf_counter() - t0, 3)
     write_json_gz(path, res)
     return {"stem": ref.stem, "cached": False, "seconds": res["seconds"]}
@@ -161,10 +162,9 @@ def load_goal_cache(out: Path, ref: SceneRef) -> dict:
         return json.load(f)
 
 
-def _nav_cache(out: Path) -> None:
-    import os
-
-    os.environ.setdefault("OVON_CACHE_DIR", str(out / ".cache" / "nav"))
+def _nav_cache(out: Path) -> Path:
+    """Where both phases keep the scenes' navigation grids (computed once per scene, kept for a resume)."""
+    return out / ".cache" / "nav"
 
 
 # -- phase 2: episodes of one scene and split ----------------------------------------------------
@@ -179,7 +179,6 @@ def episodes_job(job: dict) -> dict:
     out, split = Path(job["out"]), job["split"]
     if shard_exists(out, split, ref.stem):
         return {"stem": ref.stem, "split": split, "cached": True}
-    _nav_cache(out)
     cfg = from_dict(GenerationConfig, job["cfg"])
     goals: dict[str, list[dict]] = load_goal_cache(out, ref)["goals"]
     alloc: dict[str, int] = job["allocation"]
@@ -191,7 +190,7 @@ def episodes_job(job: dict) -> dict:
     used: set[str] = set()
     nav = None
     if any(alloc.values()):
-        nav = build_navigation(load_scene_any(ref.folder), AgentConfig(), NavConfig())
+        nav = build_navigation(load_scene_any(ref.folder), AgentConfig(), NavConfig(), cache_dir=_nav_cache(out))
     # Round-robin over categories so a truncated list still covers all of them.
     queue = {c: n for c, n in sorted(alloc.items()) if n > 0}
     per_cat: dict[str, tuple] = {}
