@@ -29,12 +29,9 @@ from ovon.config.base import from_dict, to_dict
 from ovon.config.dataset import GenerationConfig
 from ovon.config.sim import AgentConfig, CameraConfig, NavConfig
 from ovon.dataset.generation_folder import generation_run_folder
-from ovon.dataset.io import shard_exists, write_scene_shard, write_split_shell
+from ovon.dataset.io import SPLITS, shard_exists, write_scene_shard, write_split_shell
 from ovon.dataset.records import Episode, ObjectGoal, ViewPoint, goal_key
 from ovon.geometry import quat_to_yaw, yaw_to_quat
-
-VAL_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
-ALL_SPLITS = ("train", *VAL_SPLITS)
 
 
 @dataclass
@@ -296,7 +293,7 @@ def generate(
     scenes_dir: str | Path,
     out: str | Path,
     cfg: GenerationConfig,
-    splits: tuple[str, ...] = ALL_SPLITS,
+    splits: tuple[str, ...] = SPLITS,
     workers: int = 1,
     executor: str = "process",
     progress: bool = True,
@@ -307,9 +304,9 @@ def generate(
     from ovon.parallel import progress_bar, run_jobs
     from ovon.scenes.vocabulary import load_vocabulary
 
-    bad = [s for s in splits if s not in ALL_SPLITS]
+    bad = [s for s in splits if s not in SPLITS]
     if bad:
-        raise ValueError(f"unknown split(s) {bad}; choose from {list(ALL_SPLITS)}")
+        raise ValueError(f"unknown split(s) {bad}; choose from {list(SPLITS)}")
     t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -326,7 +323,7 @@ def generate(
         csplit.save(cat_path)
     if cat_path != out / "categories.json":
         csplit.save(out / "categories.json")
-    split_cats = {s: csplit.categories(s) for s in ALL_SPLITS}
+    split_cats = {s: csplit.categories(s) for s in SPLITS}
     vocab, enc = load_vocabulary(), default_text_encoder()
     children = {
         s: (children_map(split_cats[s], vocab, enc, cfg.splits.children_threshold) if cfg.splits.children else {})

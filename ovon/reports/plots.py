@@ -9,6 +9,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from ovon.dataset.io import VAL_SPLITS  # noqa: E402
 from ovon.reports.compare import DISTANCE_BINS, distance_bin, failure_breakdown, sr_by  # noqa: E402
 from ovon.task.tracker import FAILURE_LABELS  # noqa: E402
 
@@ -23,11 +24,10 @@ FAILURE_COLORS = {
     "stop_left_goal": "#9467bd",
     "stop_never_saw_goal": "#c49c94",
 }
-SPLIT_ORDER = ("val_seen", "val_seen_synonyms", "val_unseen")
 
 
 def _ordered(splits):
-    return [s for s in SPLIT_ORDER if s in splits] + sorted(set(splits) - set(SPLIT_ORDER))
+    return [s for s in VAL_SPLITS if s in splits] + sorted(set(splits) - set(VAL_SPLITS))
 
 
 def plot_failures(name: str, records: list[dict], out: Path) -> Path:
