@@ -89,7 +89,7 @@ class OracleVLScorer:
 
     def score(self, observation: dict, goal_text: str) -> float:
         p = observation["privileged"]
-        key = getattr(p.world, "key", None) or id(p.world)
+        key = p.world.key or id(p.world)  # an unnamed scene (scene_id "") is told apart by identity
         if key != self._scene_key:
             self.encoder.set_scene({o.id: o.category for o in p.world.scene.objects if o.category})
             self._scene_key = key

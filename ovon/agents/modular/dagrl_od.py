@@ -40,7 +40,7 @@ class DAgRLODAgent:
             self.cfg.checkpoint, deterministic=self.cfg.deterministic, threads=self.cfg.threads,
             temperature=self.cfg.temperature,
         )
-        self.core = ModularCore(self.cfg, getattr(self.policy, "text", None))
+        self.core = ModularCore(self.cfg, self.policy.text)
         self.privileged = bool(self.policy.privileged) or self.core.privileged
         perception = "oracle perception" if self.policy.privileged else self.policy.encoder_cfg.image
         self.name = describe_dagrl_od(self.cfg, perception)
