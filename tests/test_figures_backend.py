@@ -25,7 +25,8 @@ rec = {"split": "val_seen", "success": 0, "failure": "timeout_missed_goal", "geo
 plots.plot_failures("x", [rec, {**rec, "success": 1, "failure": None}], out / "failures.png")
 plots.plot_sr_vs_distance([("x", [rec])], out / "distance.png")
 (out / "run").mkdir()
-(out / "run" / "metrics.jsonl").write_text('{"update": 1, "step": 8, "loss": 1.5}\\n{"update": 2, "step": 16, "loss": 1.2}\\n')
+rows = ['{"update": 1, "step": 8, "loss": 1.5}', '{"update": 2, "step": 16, "loss": 1.2}']
+(out / "run" / "metrics.jsonl").write_text("\\n".join(rows) + "\\n")
 assert figures.training_curve("x", out / "run", out / "curve.png") == out / "curve.png"
 render_topdown(generate_house(0), out / "house.png")
 print(matplotlib.get_backend(), "matplotlib.pyplot" in sys.modules)

@@ -1,6 +1,6 @@
 """Training configs: one dataclass tree for BC, DAgger and PPO (+ BC->RL / DAgger->RL fine-tuning).
 
-Why one tree: every number of baselines.md is a config value reachable from YAML or `--set key=value`
+Why one tree: every number of docs/spec.md#baselines is a config value reachable from YAML or `--set key=value`
 (`ovon.config.base.build`), and a checkpoint stores the whole tree so `--resume` and the policy agent
 rebuild exactly what was trained. Presets: `paper` (upstream hyperparameters), `cpu-small` (learns on
 a 2-core CPU in tens of minutes), `tiny` (tests: seconds).
@@ -42,7 +42,7 @@ class PPOConfig:
 
 @dataclass(frozen=True)
 class FinetuneConfig:
-    """BC->RL / DAgger->RL schedule (baselines.md), in updates; `scale` stretches or shrinks it.
+    """BC->RL / DAgger->RL schedule (docs/spec.md#fine-tune-schedule), in updates; `scale` stretches or shrinks it.
 
     critic lr: `critic_lr` until `critic_decay_start`, then linear to `critic_lr_final` at
     `critic_decay_end`. actor (+ core + input projection) lr: 0 until `actor_unfreeze`, then linear

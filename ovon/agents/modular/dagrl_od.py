@@ -1,4 +1,4 @@
-"""`--agent dagrl-od --checkpoint POLICY`: DAgRL+OD (baselines.md): the end-to-end policy explores until
+"""`--agent dagrl-od --checkpoint POLICY`: DAgRL+OD (docs/spec.md#dagrl-od): the end-to-end policy explores until
 the detector fires on the goal text; from then on the bee-lining module (the one VLFM uses) drives to the
 nearest lifted goal point and STOPs, for the rest of the episode.
 
