@@ -1,5 +1,5 @@
 """Failure analysis through the real environment: scripted trajectories in a hand-built room with a
-"couch" goal and a "toaster" distractor, each label of task.md checked from `info["metrics"]`.
+"couch" goal and a "toaster" distractor, each label of docs/spec.md#failure-labels checked from `info["metrics"]`.
 
 Room interior [0, 6] x [0, 4] (x, z), floor y = 0, walls 2.5 m. Couch box x 0.3-1.5, z 0.2-0.9 (0.8 m
 high) in the -z/-x corner; toaster box x 4.8-5.5, z 0.2-0.8 (0.6 m high) in the -z/+x corner. Yaw 0 looks

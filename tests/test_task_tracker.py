@@ -1,4 +1,4 @@
-"""Metrics and failure labels against hand-computed trajectories (task.md)."""
+"""Metrics and failure labels against hand-computed trajectories (docs/spec.md#metrics, #failure-labels)."""
 
 import math
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import inspect
 
 from ovon.agents.base import Agent, is_privileged
-from ovon.plugins import PluginError, is_spec, load_object
+from ovon.plugins import PluginError, load_object, lookup
 
 BUILTIN: dict[str, str] = {
     "random": "ovon.agents.random_agent:RandomAgent",
@@ -30,8 +30,8 @@ class AgentError(ValueError):
 
 def load_agent_class(name: str) -> type:
     fix = _FIX.format(builtin=sorted(BUILTIN))
-    target = BUILTIN.get(name, name)
-    if not is_spec(target):
+    target = lookup(name, BUILTIN)
+    if target is None:
         raise AgentError(f"unknown agent {name!r}; {fix}")
     try:
         obj = load_object(target)

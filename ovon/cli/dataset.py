@@ -24,8 +24,8 @@ from ovon.config.base import (
     non_empty,
     positive,
 )
-from ovon.dataset.io import SPLIT_NAME_PATTERN
-from ovon.dataset.splits import EPISODE_SPLITS as _SPLITS
+from ovon.dataset.io import HELD_OUT_SPLITS, SPLIT_NAME_PATTERN
+from ovon.dataset.io import SPLITS as _SPLITS
 from ovon.dataset.splits import SplitConfig
 
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
@@ -148,7 +148,7 @@ def cmd_splits(args) -> int:
     cs = split_categories(cats, SplitConfig(seed=a.seed, holdout_fraction=a.holdout,
                                             similarity_threshold=a.threshold))
     cs.save(a.out)
-    for name in ("val_seen_synonyms", "val_unseen"):
+    for name in HELD_OUT_SPLITS:
         rng = cs.similarity_range(name)
         print(f"{name}: {len(cs.categories(name))} categories"
               + (f", similarity [{rng[0]:.2f}, {rng[1]:.2f}]" if rng else ""))

@@ -112,14 +112,17 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     from ovon.scenes.hm3dsem import load_scene
-    from ovon.scenes.inspect import navigation_summary, print_summary, summarize
+    from ovon.scenes.inspect import print_summary, summarize
 
     if str(args.path).lower().endswith(".navmesh"):
         return _inspect_navmesh(args)
     scene = load_scene(args.path, up=args.up)
     summary = summarize(scene)
     if args.nav:
-        summary["navigation"] = navigation_summary(scene)
+        from ovon.config.dataset import StartConfig
+        from ovon.sim.navsummary import navigation_summary
+
+        summary["navigation"] = navigation_summary(scene, StartConfig().min_island_radius)
     if args.json:
         print(json.dumps(summary, indent=1))
     else:

@@ -1,4 +1,4 @@
-"""Episode-generation configs (dataset.md). `paper` follows the paper; `fast` is for CPU demos/tests.
+"""Episode-generation configs (docs/spec.md#generation). `paper` follows the paper; `fast` is for CPU demos/tests.
 
 Every field has a declared domain (`ovon.config.base`): a negative episode count, a 0-pixel render or a
 0 m viewpoint grid is refused before any scene is loaded."""

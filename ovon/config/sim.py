@@ -1,4 +1,4 @@
-"""Simulator configs: the Stretch embodiment of task.md and the navigability grid.
+"""Simulator configs: the Stretch embodiment (docs/spec.md#agent) and the navigability grid.
 
 Every field has a declared domain (`ovon.config.base`); the bounds are what the simulator can run
 (a 0-wide camera, a 0 m step or a 180 deg field of view are refused before any work)."""

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ovon.dataset.io import EpisodeDataset
+from ovon.dataset.io import HELD_OUT_SPLITS, EpisodeDataset
 
 HIST_EDGES = (0, 2, 4, 6, 8, 10, 15, 20, 30)
 
@@ -65,7 +65,7 @@ def dataset_stats(root: str | Path) -> dict:
     cat_file = root / "categories.json"
     if cat_file.exists():
         doc = json.loads(cat_file.read_text())
-        for s in ("val_seen_synonyms", "val_unseen"):
+        for s in HELD_OUT_SPLITS:
             sims = [h["max_similarity"] for h in doc.get(s, [])]
             if sims:
                 out.setdefault("category_split", {})[s] = {

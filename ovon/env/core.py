@@ -203,7 +203,7 @@ def observation_spaces(sim: SimConfig) -> dict[str, spaces.Space]:
             np.float32,
         ),
         "goal": spaces.Text(MAX_GOAL_LEN, min_length=1, charset=GOAL_CHARSET),
-        # 1 when the step that led here was blocked (a bump sensor; task.md reports it each step)
+        # 1 when the step that led here was blocked (a bump sensor; docs/spec.md#observations)
         "collided": spaces.Discrete(2),
     }
     if cam.rgb:

@@ -32,12 +32,11 @@ from ovon.config.base import (
 )
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
-from ovon.dataset.io import SPLIT_NAME_PATTERN
+from ovon.dataset.io import SPLIT_NAME_PATTERN, VAL_SPLITS
 from ovon.evaluate.results import RecordWriter, paper_table, read_records, record_key, summarize, write_canonical
 from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
-DEFAULT_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
@@ -51,7 +50,7 @@ class EvalConfig:
     agent_kwargs: dict = field(default_factory=dict)
     data: str = constrained("data/datasets/ovon", ExistingDir(), flag="--data")
     scenes: str = constrained("data/scene_datasets", ExistingDir(), flag="--scenes")
-    splits: tuple[str, ...] = non_empty(DEFAULT_SPLITS, each=SPLIT_NAME, distinct=True, flag="--splits")
+    splits: tuple[str, ...] = non_empty(VAL_SPLITS, each=SPLIT_NAME, distinct=True, flag="--splits")
     seeds: tuple[int, ...] = non_empty((0,), each=NonNegative(), distinct=True, flag="--seeds")
     episodes: int | None = positive(None, flag="--episodes")  # per split; None = all
     workers: int = in_range(1, 1, 1024, flag="--workers")

@@ -1,4 +1,4 @@
-"""Stretch-like agent kinematics on the navigability grid: the six actions of task.md, collisions,
+"""Stretch-like agent kinematics on the navigability grid: the six actions (docs/spec.md#actions), collisions,
 optional sliding, actuation noise, and odometry relative to the start pose.
 
 Collision model: forward motion is checked against the navigable (radius-eroded) grid by sampling the

@@ -40,7 +40,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import math
-import os
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,13 +48,13 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
+from ovon.atomic import atomic_write_with
 from ovon.config.sim import AgentConfig, NavConfig
 from ovon.scenes.model import Scene
 from ovon.sim.gridframe import grid_frame as _grid_frame
 from ovon.sim.gridframe import hint_bands
 from ovon.sim.los import los_between
 
-DEFAULT_MAX_SLOPE_DEG = 30.0  # used when NavConfig has no `max_slope_deg`
 MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
 MIN_COVERED_FRACTION = 0.5  # no-hint mode: a floor has a ceiling over most of it; roofs do not
 ELEVATED_M = 0.3  # islands whose median surface is this far above the floor are furniture tops
@@ -607,7 +606,7 @@ def compute_navigation(
     if len(F) == 0:
         return []
     origin, rows, cols = _grid_frame(V, cs)
-    slope = float(getattr(nav, "max_slope_deg", DEFAULT_MAX_SLOPE_DEG))
+    slope = float(nav.max_slope_deg)
     s = _rasterise(V, F, origin, cs, rows, cols, agent, slope)
     grids = []
     for i, (nominal, lo, hi) in enumerate(_floor_bands(s, list(floor_heights or []), agent, nav, cs)):
@@ -634,36 +633,50 @@ def _cache_key(scene: Scene, agent: AgentConfig, nav: NavConfig) -> str:
 
 
 def _save(path: Path, grids: list[NavGrid]) -> None:
-    arrays: dict[str, np.ndarray] = {}
+    """Write the grids through `ovon.atomic` (a unique temp name, then rename): two processes building the
+    same scene each write a whole file, and a reader sees a whole file or none. A failed write (disk
+    full, read-only folder) only loses the saving: the cache is an optimisation."""
+    arrays: dict[str, np.ndarray] = {"n": np.array(len(grids))}
     for i, g in enumerate(grids):
         arrays[f"meta{i}"] = np.array([g.height, g.origin[0], g.origin[1], g.cell_size])
         arrays[f"free{i}"] = g.free
         arrays[f"heights{i}"] = g.heights
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, n=np.array(len(grids)), **arrays)
-    os.replace(tmp, path)
+    try:
+        atomic_write_with(path, lambda f: np.savez_compressed(f, **arrays))
+    except OSError:
+        pass
 
 
-def _load(path: Path, agent: AgentConfig) -> list[NavGrid]:
-    grids = []
-    with np.load(path) as z:
-        for i in range(int(z["n"])):
-            h, ox, oz, cs = z[f"meta{i}"]
-            free, heights = z[f"free{i}"], z[f"heights{i}"]
-            grids.append(_grid(i, float(h), np.array([ox, oz]), float(cs), free, heights, agent))
-    return grids
+def _load(path: Path, agent: AgentConfig) -> list[NavGrid] | None:
+    """The cached grids, or None (a miss) when the file is absent or cannot be used for any reason: torn
+    by a kill (BadZipFile, EOFError), truncated, other keys or shapes, a disk error. The caller then
+    rebuilds and replaces it, so a bad file never breaks a scene for good."""
+    if not path.is_file():
+        return None
+    try:
+        grids = []
+        with np.load(path, allow_pickle=False) as z:
+            for i in range(int(z["n"])):
+                h, ox, oz, cs = z[f"meta{i}"]
+                free, heights = z[f"free{i}"], z[f"heights{i}"]
+                grids.append(_grid(i, float(h), np.array([ox, oz]), float(cs), free, heights, agent))
+        return grids
+    except Exception:  # noqa: BLE001 - whatever is wrong with a cache file, the answer is to rebuild it
+        return None
 
 
-def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavConfig | None = None) -> SceneNav:
-    """Navigation grids of a scene, cached in-process by mesh content + params (and on disk when the
-    environment variable OVON_CACHE_DIR names a folder).
+def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavConfig | None = None,
+                     cache_dir: str | Path | None = None) -> SceneNav:
+    """Navigation grids of a scene, cached in-process by mesh content + params, and on disk in
+    `cache_dir` (`nav_<key>.npz`) when given: `ovon dataset generate` passes `<out>/.cache/nav`, so its
+    two phases and a resumed run compute each scene's grids once.
 
     `nav.source` picks where navigability comes from: the habitat navmesh beside the mesh
     (`Scene.navmesh`, read by `ovon.sim.navmesh.load_navmesh`), the mesh itself, or (auto) the navmesh
     when the scene has one."""
     agent = agent or AgentConfig()
     nav = nav or NavConfig()
-    source = getattr(nav, "source", "mesh")
+    source = nav.source
     if source == "navmesh" and not scene.navmesh:
         raise ValueError(
             f"sim.nav.source=navmesh but scene {scene.scene_id} has no habitat navmesh (<id>.navmesh or "
@@ -678,22 +691,12 @@ def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavCon
     if hit is not None:
         _CACHE.move_to_end(key)
         return hit
-    grids = None
-    cache_dir = os.environ.get("OVON_CACHE_DIR")
-    path = Path(cache_dir) / f"nav_{key}.npz" if cache_dir else None
-    if path is not None and path.exists():
-        try:
-            grids = _load(path, agent)
-        except (OSError, KeyError, ValueError):
-            grids = None
+    path = Path(cache_dir) / f"nav_{key}.npz" if cache_dir is not None else None
+    grids = _load(path, agent) if path is not None else None
     if grids is None:
         grids = compute_navigation(scene.mesh.vertices, scene.mesh.faces, scene.floor_heights, agent, nav)
         if path is not None:
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                _save(path, grids)
-            except OSError:
-                pass
+            _save(path, grids)
     result = SceneNav(floors=grids, agent=agent, nav=nav, key=key)
     _CACHE[key] = result
     while len(_CACHE) > _CACHE_SIZE:

@@ -1,5 +1,6 @@
 """One episode's ground-truth bookkeeping: distance to goal, path length, collisions, success, SPL,
-SoftSPL and the failure label (task.md). Everything here uses the *true* pose, never noisy sensors.
+SoftSPL and the failure label (docs/spec.md#metrics, #failure-labels). Everything here uses the *true*
+pose, never noisy sensors.
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ class EpisodeTracker:
         return self.called_stop and self.distance < self.cfg.success_distance
 
     def reward(self) -> float:
-        """Reward of the last step (task.md): dense shaping or the sparse fine-tuning reward."""
+        """Reward of the last step (docs/spec.md#rewards): dense shaping or the sparse fine-tuning reward."""
         r = self.cfg.reward
         if r.kind == "dense":
             if self.success:

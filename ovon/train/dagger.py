@@ -1,5 +1,5 @@
 """DAgger: the student's sampled action drives the env, the expert labels every visited state online,
-and the policy is trained with cross-entropy on those labels (baselines.md; upstream: beta = 0).
+and the policy is trained with cross-entropy on those labels (docs/spec.md#training-algorithms; upstream: beta = 0).
 
 Upstream trains on-policy: every update collects `rollout_steps` steps in each env and takes one
 gradient step on those (num_envs x rollout_steps) chunks. `dagger.buffer_rollouts` > 1 aggregates the

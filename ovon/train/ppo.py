@@ -1,6 +1,5 @@
 """PPO with the dense reward (RL from scratch), or - with `--init CKPT` - BC->RL / DAgger->RL
-fine-tuning: re-initialised critic, sparse reward, and the fine-tune schedule of the paper's baselines
-(docs/internal_api.md).
+fine-tuning: re-initialised critic, sparse reward, and the fine-tune schedule of docs/spec.md#fine-tune-schedule.
 
 Fine-tune schedule (updates, all multiplied by `finetune.scale`): critic lr `critic_lr` until
 `critic_decay_start`, then linear to `critic_lr_final` at `critic_decay_end`; actor + core + input

@@ -1,4 +1,4 @@
-"""`--agent vlfm`: the VLFM-style modular baseline (baselines.md "Modular baseline", vlfm.md).
+"""`--agent vlfm`: the VLFM-style modular baseline (docs/spec.md#modular-baseline and #vlfm).
 
 Episode: 12 TURN_LEFT (a full turn) -> explore the frontier with the highest language value, driven to
 by the point-goal navigator -> once the detector fires, bee-line to the nearest lifted goal point and STOP
