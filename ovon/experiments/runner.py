@@ -25,6 +25,7 @@ from ovon.experiments.select import select
 from ovon.experiments.state import (
     Status,
     cell_lock,
+    config_unknown,
     count_lines,
     full_commands,
     identity,
@@ -35,6 +36,7 @@ from ovon.experiments.state import (
     plan_status,
     read_record,
     record_path,
+    resolved_config,
     write_record,
 )
 
@@ -171,9 +173,12 @@ def commands_to_run(cell: Cell) -> list[list[str]]:
 def execute(plan: Plan, cell: Cell, progress=None) -> int:
     """Run the cell's commands under its record; returns the exit code (0 = finished)."""
     rec = read_record(plan, cell) or {}
+    if rec.get("state") == "running":  # the attempt before died with its runner: keep what it ran with
+        rec.setdefault("history", []).append({"started": rec.get("started"), "wall_s": None, "rc": "killed",
+                                              "code": rec.get("code")})
     rec.update({"kind": cell.kind, "name": cell.name, "identity": identity(plan, cell), "state": "running",
                 "attempts": int(rec.get("attempts", 0)) + 1, "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-                "code": code_version()})
+                "code": code_version(), "config": resolved_config(plan, cell)})
     write_record(plan, cell, rec)
     log = log_path(plan, cell)
     t0 = time.perf_counter()
@@ -220,7 +225,8 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
 def _finish_record(plan: Plan, cell: Cell, rec: dict, t0: float) -> None:
     wall = time.perf_counter() - t0
     rec["wall_s"] = round(float(rec.get("wall_s", 0.0)) + wall, 1)
-    rec.setdefault("history", []).append({"started": rec["started"], "wall_s": round(wall, 1), "rc": rec.get("rc")})
+    rec.setdefault("history", []).append({"started": rec["started"], "wall_s": round(wall, 1), "rc": rec.get("rc"),
+                                          "code": rec.get("code")})
     write_record(plan, cell, rec)
 
 
@@ -305,6 +311,10 @@ def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None
                               "which the runner never moves; fix: --redo the training or evaluation cells instead")
     for cid in cascade:
         statuses[cid] = Status("redo", "its old folder will be kept as <folder>.old-N")
+    unknown = [c for c in config_unknown(plan, ids) if c not in cascade]
+    if unknown:
+        say(console, f"note: {len(unknown)} finished cell(s) ran before ovon recorded resolved configs "
+                     f"({', '.join(unknown)}): only their commands are compared; --redo them to record it")
     if dry_run:
         head = f"{plan.names} at scale {plan.scale.name}, root {plan.root}: {len(ids)} of {len(plan.cells)} cells"
         say(console, head + (f" (shard {shard[0]}/{shard[1]})" if shard else ""))
