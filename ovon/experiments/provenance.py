@@ -1,7 +1,7 @@
 """Which code each cell of a report ran with, and which entries rest on cells from other code.
 
 Why: a report is one claim only when its numbers come from one version of the code. Every attempt of a
-cell records `ovon 0.1.0 (commit[+dirty])` (`runner.code_version`); the reference is the commit most
+cell records `ovon 0.1.0 (commit[+dirty])` (`code_version`); the reference is the commit most
 finished cells ran with, and a cell is *marked* when any of its attempts ran with another one, from a
 tree with uncommitted changes, or with unrecorded code. A table entry is marked when its evaluation or
 any cell it needs (its training, that training's init, the data) is.
@@ -10,7 +10,9 @@ any cell it needs (its training, that training's init, the data) is.
 from __future__ import annotations
 
 import re
+import subprocess
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
 from ovon.experiments.plan import Plan
@@ -18,6 +20,27 @@ from ovon.experiments.state import Status, read_record
 
 MARK = "†"
 _CODE = re.compile(r"^(?P<version>.*?)(?: \((?P<commit>[0-9a-f]{4,40})(?P<dirty>\+dirty)?\))?$")
+
+
+def code_version() -> str:
+    """The ovon code a cell ran with: its version and, in a git checkout, the commit (+dirty)."""
+    import ovon
+
+    text = f"ovon {getattr(ovon, '__version__', '?')}"
+    where = str(Path(ovon.__file__).resolve().parent)
+    try:
+        rev = subprocess.run(
+            ["git", "-C", where, "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", where, "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return text
+    return f"{text} ({rev}{'+dirty' if dirty else ''})" if rev else text
 
 
 def parse_code(text: str) -> dict[str, Any]:

@@ -20,7 +20,14 @@ from ovon.config.base import to_dict
 from ovon.experiments.definitions import Experiment, paper_numbers, parse_ref, row_eval
 from ovon.experiments.findings import RULE_NOTE, judge
 from ovon.experiments.plan import PERCEPTION, Cell, Plan, flat_set, render_value
-from ovon.experiments.provenance import MARK, cell_provenance, headline, marked_chain, provenance_markdown
+from ovon.experiments.provenance import (
+    MARK,
+    cell_provenance,
+    code_version,
+    headline,
+    marked_chain,
+    provenance_markdown,
+)
 from ovon.experiments.state import (
     EPISODES_TOKEN,
     ROOT_TOKEN,
@@ -108,8 +115,6 @@ def _pct(entry: dict, metric: str) -> tuple[float, float]:
 def collect(plan: Plan) -> dict:
     """Everything the report shows, as JSON-able data; paths are written `$ROOT`, `$EPISODES`, `$SCENES`."""
     from ovon.evaluate.results import summarize
-    from ovon.experiments.runner import code_version
-
     statuses = plan_status(plan)
     prov = cell_provenance(plan, statuses, code_version())
     evals: dict[str, dict] = {}

@@ -21,6 +21,7 @@ from rich.console import Console
 
 from ovon.experiments.definitions import DefinitionError
 from ovon.experiments.plan import Cell, Plan, display
+from ovon.experiments.provenance import code_version
 from ovon.experiments.select import select
 from ovon.experiments.state import (
     Status,
@@ -134,22 +135,6 @@ def run_command(cell: Cell, argv: list[str], log: Path, on_poll=None, on_start=N
         _stop(proc)
         raise
     return int(proc.returncode)
-
-
-def code_version() -> str:
-    """The ovon code a cell ran with: its version and, in a git checkout, the commit (+dirty)."""
-    import ovon
-
-    text = f"ovon {getattr(ovon, '__version__', '?')}"
-    where = str(Path(ovon.__file__).resolve().parent)
-    try:
-        rev = subprocess.run(["git", "-C", where, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                             timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "-C", where, "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return text
-    return f"{text} ({rev}{'+dirty' if dirty else ''})" if rev else text
 
 
 def log_tail(log: Path, lines: int = 6) -> str:
