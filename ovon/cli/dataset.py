@@ -105,13 +105,19 @@ def register(sub) -> None:
     v.set_defaults(func=cmd_validate)
 
 
-def cmd_generate(args) -> int:
+def generation_config(args):
+    """The `GenerationConfig` of a `dataset generate` command line: the preset, `--config`, `--set`."""
     from ovon.config.base import build
     from ovon.config.dataset import GENERATION_PRESETS, GenerationConfig
+
+    return build(GenerationConfig, GENERATION_PRESETS[args.preset](), args.config or None, args.set)
+
+
+def cmd_generate(args) -> int:
     from ovon.dataset.generate import generate
 
     a = from_args(GenerateArgs, args, split=tuple(args.split) if args.split else None)
-    cfg = build(GenerationConfig, GENERATION_PRESETS[args.preset](), a.config or None, args.set)
+    cfg = generation_config(args)
     rep = generate(a.scenes, args.out, cfg, splits=a.split, workers=a.workers, executor=a.executor,
                    progress=not args.no_progress, category_split_path=a.categories or None)
     n = sum(rep.episodes.values())

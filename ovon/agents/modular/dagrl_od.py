@@ -49,10 +49,16 @@ class DAgRLODAgent:
         self.step = 0
 
     @staticmethod
-    def describe(**kwargs: Any) -> str:
+    def resolved_config(**kwargs: Any) -> DAgRLODConfig:
+        """The config the constructor builds from these arguments, the checkpoint aside (the experiment
+        runner records it, so a preset changed in code makes a finished evaluation stale)."""
         kwargs.pop("checkpoint", None)
         preset = kwargs.pop("preset", "cpu")
-        return describe_dagrl_od(modular_config(DAgRLODConfig, preset, kwargs))
+        return modular_config(DAgRLODConfig, preset, kwargs)
+
+    @staticmethod
+    def describe(**kwargs: Any) -> str:
+        return describe_dagrl_od(DAgRLODAgent.resolved_config(**kwargs))
 
     def reset(self, episode_info: dict) -> None:
         self.policy.reset(episode_info)

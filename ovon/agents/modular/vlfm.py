@@ -50,10 +50,16 @@ class VLFMAgent:
         self.timing: dict[str, float] = {}  # ms of the last step per phase (benchmarks/vlfm_step.py)
 
     @staticmethod
+    def resolved_config(**kwargs: Any) -> VLFMConfig:
+        """The config the constructor builds from these arguments (the experiment runner records it, so a
+        preset changed in code makes a finished evaluation stale)."""
+        preset = kwargs.pop("preset", "cpu")
+        return modular_config(VLFMConfig, preset, kwargs)
+
+    @staticmethod
     def describe(**kwargs: Any) -> str:
         """Row name for reports, from the constructor arguments."""
-        preset = kwargs.pop("preset", "cpu")
-        return describe_vlfm(modular_config(VLFMConfig, preset, kwargs))
+        return describe_vlfm(VLFMAgent.resolved_config(**kwargs))
 
     def reset(self, episode_info: dict) -> None:
         core = self.core
