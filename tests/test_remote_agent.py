@@ -12,6 +12,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -89,6 +90,10 @@ def test_workers_and_lockstep_streams_reach_act_batch_as_batches(tiny_dataset, t
             tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{server.port}", workers=2, remote=RemoteConfig(batch=3)
         )
         evaluate(remote, tmp_path / "remote", progress=False)
+        deadline = time.monotonic() + 10
+        while server._sessions and time.monotonic() < deadline:  # workers said goodbye as they ended
+            time.sleep(0.05)
+        assert not server._sessions
     same_files(tmp_path / "local", tmp_path / "remote")
     assert max(agent.batch_sizes) >= 3
     assert len({k.split("/")[0] for k in agent.agents}) >= 2  # several connections (workers)

@@ -11,6 +11,7 @@ never from the command line or the run folder.
 
 from __future__ import annotations
 
+import multiprocessing.util
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +38,7 @@ def is_remote(agent: str) -> bool:
 
 def parse_address(agent: str) -> tuple[str, int]:
     """`remote:HOST:PORT` (IPv6 as `remote:[::1]:PORT`) -> (host, port); one-line ConfigError otherwise."""
-    rest = str(agent)[len(PREFIX):]
+    rest = str(agent)[len(PREFIX) :]
     host, sep, port = rest.rpartition(":")
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
     if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
@@ -66,10 +67,17 @@ class RemoteAgent:
         self._info: dict[int, dict] = {}  # stream -> info of its current episode (for error lines)
         self._steps: dict[int, int] = {}
         try:
-            self.client = Client(host, port, token=os.environ.get(TOKEN_ENV) or None, timeout_s=self.cfg.timeout_s,
-                                 client=f"ovon {__version__}")
+            self.client = Client(
+                host,
+                port,
+                token=os.environ.get(TOKEN_ENV) or None,
+                timeout_s=self.cfg.timeout_s,
+                client=f"ovon {__version__}",
+            )
         except RemoteError as e:
             raise RemoteError(self._fix(str(e), e.kind, during_run=False), e.kind) from None
+        # a worker process that ends normally says goodbye, so the server frees its agents at once
+        multiprocessing.util.Finalize(self, self.client.close, exitpriority=10)
         hello = self.client.hello
         self.name = str(hello.get("agent") or self.spec)
         self.privileged = bool(hello.get("privileged"))
@@ -78,13 +86,17 @@ class RemoteAgent:
         unknown = [o for o in self.observations if o not in OBSERVATIONS]
         if unknown:
             self.close()
-            raise ConfigError(f"--agent {self.spec}: the agent {self.name!r} wants observations {unknown}, which ovon "
-                              f"does not provide ({', '.join(OBSERVATIONS)}); fix: its `observations`")
+            raise ConfigError(
+                f"--agent {self.spec}: the agent {self.name!r} wants observations {unknown}, which ovon "
+                f"does not provide ({', '.join(OBSERVATIONS)}); fix: its `observations`"
+            )
         if self.privileged and not self.cfg.allow_privileged:
             self.close()
-            raise ConfigError(f"--agent {self.spec}: the agent {self.name!r} asks for the privileged channel (ground "
-                              "truth: an oracle); fix: --set remote.allow_privileged=true to evaluate an oracle, or "
-                              "serve an agent that uses its sensors only")
+            raise ConfigError(
+                f"--agent {self.spec}: the agent {self.name!r} asks for the privileged channel (ground "
+                "truth: an oracle); fix: --set remote.allow_privileged=true to evaluate an oracle, or "
+                "serve an agent that uses its sensors only"
+            )
 
     def _fix(self, message: str, kind: str, during_run: bool = True) -> str:
         resume = ", then re-run the same command to resume (finished episodes are kept)" if during_run else ""
@@ -95,8 +107,10 @@ class RemoteAgent:
         if kind == "agent":
             return f"{message}; fix: see the server's log and fix the agent{resume}"
         port = self.spec.rpartition(":")[2]
-        return (f"{message}; fix: check that the agent is served there (`ovon serve AGENT --port {port}`) and raise "
-                f"--set remote.timeout_s if it is only slow{resume}")
+        return (
+            f"{message}; fix: check that the agent is served there (`ovon serve AGENT --port {port}`) and raise "
+            f"--set remote.timeout_s if it is only slow{resume}"
+        )
 
     # -- the Agent protocol ------------------------------------------------------------------------
     def reset(self, episode_info: dict, stream: int = 0) -> None:
@@ -148,8 +162,10 @@ def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None
     if agent_kwargs:
         key = next(iter(agent_kwargs))
         flag = "--checkpoint" if key == "checkpoint" else f"--agent-arg {key}=..."
-        raise ConfigError(f"{flag} is given with --agent {agent}: constructor arguments of a served agent belong to "
-                          f"the server; fix: pass them to `ovon serve AGENT {flag}` instead")
+        raise ConfigError(
+            f"{flag} is given with --agent {agent}: constructor arguments of a served agent belong to "
+            f"the server; fix: pass them to `ovon serve AGENT {flag}` instead"
+        )
     parse_address(agent)
     remote = RemoteAgent(agent, cfg)
     try:

@@ -43,7 +43,9 @@ def servable_factory(agent: str, kwargs: dict | None = None):
     kwargs = dict(kwargs or {})
     cls = load_agent_class(agent)
     if not getattr(cls, "servable", True):
-        raise AgentError(f"agent {agent!r} cannot be served: {getattr(cls, 'servable_reason', 'it reads ground truth')}"
-                         "; fix: evaluate it in-process (ovon evaluate --agent " + agent + ")")
+        raise AgentError(
+            f"agent {agent!r} cannot be served: {getattr(cls, 'servable_reason', 'it reads ground truth')}"
+            "; fix: evaluate it in-process (ovon evaluate --agent " + agent + ")"
+        )
     check_agent(agent, kwargs)
     return lambda: ServedAgent(make_agent(agent, **kwargs))

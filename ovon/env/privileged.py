@@ -41,8 +41,7 @@ def privileged_of(info: dict) -> Privileged:
 # per step the true pose, the semantic frame and the geodesic distance to the goal. Enough for oracle
 # detection and oracle perception (VLFM, DAgRL+OD, the oracle-vl policy); not the navigation grid or the
 # goal distance field, which the grid experts need (they are evaluated in-process).
-CARRIED = ("state", "frame.semantic", "goal_ids", "viewpoints", "world.key", "world.scene.objects",
-           "distance_to_goal")
+CARRIED = ("state", "frame.semantic", "goal_ids", "viewpoints", "world.key", "world.scene.objects", "distance_to_goal")
 
 
 def episode_to_wire(p: Privileged) -> dict:
@@ -53,8 +52,9 @@ def episode_to_wire(p: Privileged) -> dict:
         "object_ids": np.array([o.id for o in objects], dtype=np.int64),
         "object_categories": [str(o.category) for o in objects],
         "goal_ids": np.array(sorted(p.goal_ids), dtype=np.int64),
-        "viewpoints": np.array([[*map(float, v.position), float(v.yaw)] for v in p.viewpoints],
-                               dtype=np.float64).reshape(-1, 4),
+        "viewpoints": np.array(
+            [[*map(float, v.position), float(v.yaw)] for v in p.viewpoints], dtype=np.float64
+        ).reshape(-1, 4),
     }
 
 
@@ -79,8 +79,10 @@ class _Part:
     def __getattr__(self, name: str):
         if name.startswith("__") or name == "_where":
             raise AttributeError(name)
-        raise AttributeError(f"privileged.{self._where}{name} is not carried by the remote protocol (it carries "
-                             f"{', '.join(CARRIED)}); evaluate this agent in-process instead")
+        raise AttributeError(
+            f"privileged.{self._where}{name} is not carried by the remote protocol (it carries "
+            f"{', '.join(CARRIED)}); evaluate this agent in-process instead"
+        )
 
 
 def from_wire(episode: dict, step: dict) -> _Part:
@@ -90,13 +92,22 @@ def from_wire(episode: dict, step: dict) -> _Part:
     from ovon.sim.types import AgentState
     from ovon.task.episode import GoalViewpoint
 
-    objects = [SimpleNamespace(id=int(i), category=c)
-               for i, c in zip(np.asarray(episode["object_ids"]).tolist(), episode["object_categories"])]
+    objects = [
+        SimpleNamespace(id=int(i), category=c)
+        for i, c in zip(np.asarray(episode["object_ids"]).tolist(), episode["object_categories"])
+    ]
     scene = _Part("world.scene.", objects=objects, scene_id=episode["scene"])
     state = AgentState(np.asarray(step["position"], dtype=np.float64), float(step["yaw"]), float(step["pitch"]))
-    viewpoints = [GoalViewpoint(np.asarray(v[:3], dtype=np.float64), float(v[3]))
-                  for v in np.asarray(episode["viewpoints"], dtype=np.float64).reshape(-1, 4)]
-    return _Part("", state=state, frame=_Part("frame.", semantic=np.asarray(step["semantic"])),
-                 goal_ids=frozenset(np.asarray(episode["goal_ids"]).tolist()), viewpoints=viewpoints,
-                 world=_Part("world.", key=episode["scene"], scene=scene),
-                 distance_to_goal=float(step["distance_to_goal"]))
+    viewpoints = [
+        GoalViewpoint(np.asarray(v[:3], dtype=np.float64), float(v[3]))
+        for v in np.asarray(episode["viewpoints"], dtype=np.float64).reshape(-1, 4)
+    ]
+    return _Part(
+        "",
+        state=state,
+        frame=_Part("frame.", semantic=np.asarray(step["semantic"])),
+        goal_ids=frozenset(np.asarray(episode["goal_ids"]).tolist()),
+        viewpoints=viewpoints,
+        world=_Part("world.", key=episode["scene"], scene=scene),
+        distance_to_goal=float(step["distance_to_goal"]),
+    )

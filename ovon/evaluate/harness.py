@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from ovon.agents.remote import RemoteConfig
 from ovon.atomic import atomic_write_text
 from ovon.config.base import (
     ExistingDir,
@@ -30,7 +31,6 @@ from ovon.config.base import (
     to_dict,
     validate,
 )
-from ovon.agents.remote import RemoteConfig
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
 from ovon.dataset.io import SPLIT_NAME_PATTERN
@@ -177,16 +177,13 @@ _CACHE: dict = {}
 def _agent(unit: dict):
     """The unit's agent, cached per process across chunks (a remote one keeps its connection)."""
     from ovon.agents import make_agent
-    from ovon.agents.remote import RemoteAgent, is_remote
-    from ovon.config.base import from_dict
+    from ovon.agents.remote import is_remote
 
-    key = (unit["agent"], json.dumps(unit["agent_kwargs"], sort_keys=True), json.dumps(unit["remote"], sort_keys=True))
+    kwargs = unit["remote"] if is_remote(unit["agent"]) else unit["agent_kwargs"]
+    key = (unit["agent"], json.dumps(kwargs, sort_keys=True))
     if _CACHE.get("agent_key") != key:
         release_agent()
-        if is_remote(unit["agent"]):
-            _CACHE["agent"] = RemoteAgent(unit["agent"], from_dict(RemoteConfig, unit["remote"]))
-        else:
-            _CACHE["agent"] = make_agent(unit["agent"], **unit["agent_kwargs"])
+        _CACHE["agent"] = make_agent(unit["agent"], **kwargs)
         _CACHE["agent_key"] = key
     return _CACHE["agent"]
 
