@@ -226,3 +226,26 @@ def test_served_vlfm_gives_byte_identical_files(tiny_dataset, tiny_scenes, tmp_p
         )
         evaluate(remote, tmp_path / "remote", progress=False)
     same_files(tmp_path / "local", tmp_path / "remote")
+
+
+def test_make_agent_gives_a_connected_client():
+    import numpy as np
+
+    from ovon.agents import make_agent
+    from ovon.agents.random_agent import RandomAgent
+    from ovon.config.base import ConfigError
+
+    obs = {"depth": np.ones((4, 4), np.float32), "odometry": np.zeros(3, np.float32), "goal": "bed", "collided": 0}
+    info = {"episode_id": "7", "seed": 3, "goal": "bed"}
+    with serving(servable_factory("random"), name="random") as server:
+        with pytest.raises(ConfigError, match="timeout_s"):
+            make_agent(f"remote:127.0.0.1:{server.port}", timeout_s=-1)
+        remote = make_agent(f"remote:127.0.0.1:{server.port}", timeout_s=5)
+        local = RandomAgent()
+        try:
+            assert remote.name == "random" and remote.privileged is False
+            for agent in (remote, local):
+                agent.reset(info)
+            assert [remote.act(obs) for _ in range(30)] == [local.act(obs) for _ in range(30)]
+        finally:
+            remote.close()

@@ -22,8 +22,11 @@ class ServedAgent:
         self._episode: dict | None = None
 
     def reset(self, episode_info: dict) -> None:
+        from ovon.env.privileged import episode_from_wire
+
         info = dict(episode_info)
-        self._episode = info.pop("privileged", None)
+        episode = info.pop("privileged", None)
+        self._episode = None if episode is None else episode_from_wire(episode)
         self.inner.reset(info)
 
     def act(self, observation: dict) -> int:

@@ -85,11 +85,10 @@ class _Part:
         )
 
 
-def from_wire(episode: dict, step: dict) -> _Part:
-    """A read-only stand-in for `Privileged` on the agent's side of `ovon serve`, from the two parts."""
+def episode_from_wire(episode: dict) -> dict:
+    """The per-episode part as the objects a `Privileged` holds (built once per episode)."""
     from types import SimpleNamespace
 
-    from ovon.sim.types import AgentState
     from ovon.task.episode import GoalViewpoint
 
     objects = [
@@ -97,17 +96,27 @@ def from_wire(episode: dict, step: dict) -> _Part:
         for i, c in zip(np.asarray(episode["object_ids"]).tolist(), episode["object_categories"])
     ]
     scene = _Part("world.scene.", objects=objects, scene_id=episode["scene"])
-    state = AgentState(np.asarray(step["position"], dtype=np.float64), float(step["yaw"]), float(step["pitch"]))
     viewpoints = [
         GoalViewpoint(np.asarray(v[:3], dtype=np.float64), float(v[3]))
         for v in np.asarray(episode["viewpoints"], dtype=np.float64).reshape(-1, 4)
     ]
+    return {
+        "goal_ids": frozenset(np.asarray(episode["goal_ids"]).tolist()),
+        "viewpoints": viewpoints,
+        "world": _Part("world.", key=episode["scene"], scene=scene),
+    }
+
+
+def from_wire(episode: dict, step: dict) -> _Part:
+    """A read-only stand-in for `Privileged` on the agent's side of `ovon serve`: `episode` from
+    `episode_from_wire`, `step` as `step_to_wire` wrote it."""
+    from ovon.sim.types import AgentState
+
+    state = AgentState(np.asarray(step["position"], dtype=np.float64), float(step["yaw"]), float(step["pitch"]))
     return _Part(
         "",
         state=state,
         frame=_Part("frame.", semantic=np.asarray(step["semantic"])),
-        goal_ids=frozenset(np.asarray(episode["goal_ids"]).tolist()),
-        viewpoints=viewpoints,
-        world=_Part("world.", key=episode["scene"], scene=scene),
         distance_to_goal=float(step["distance_to_goal"]),
+        **episode,
     )

@@ -52,6 +52,7 @@ DTYPES = frozenset(
     o + k for o in "<>|" for k in ("b1", "i1", "i2", "i4", "i8", "u1", "u2", "u4", "u8", "f2", "f4", "f8")
 )
 MAX_ITEMS = 4096  # items in one request
+MAX_FRAME_BYTES = 1 << 28  # one array (a 4096 x 4096 RGB frame is 48 MiB)
 SESSION_IDLE_S = 3600.0  # a client silent for this long is forgotten (its agents freed)
 
 
@@ -209,6 +210,7 @@ class Server:
         self._socket = self._context.socket(zmq.ROUTER)
         self._socket.setsockopt(zmq.LINGER, 0)
         self._socket.setsockopt(zmq.ROUTER_MANDATORY, 1)  # a reply to a vanished client raises (ignored)
+        self._socket.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)  # a peer sending more is disconnected
         self.host = host
         bracket = f"[{host}]" if ":" in host else host
         if ":" in host:
