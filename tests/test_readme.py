@@ -11,7 +11,9 @@ checkout. Three documented departures keep it to minutes on a 2-core machine:
 - `python benchmarks/X.py OUT` lines run this checkout's scripts from a copy of `benchmarks/` in the temp
   folder, so their JSON never overwrites the committed results.
 
-A Python block preceded by "Save the class below as `X.py`" is also written to `X.py`.
+A Python block preceded by "Save the class below as `X.py`" is also written to `X.py`, and is run as a
+module rather than as `__main__` (its main guard may start a server that a later block uses). `python` on
+PATH is this interpreter.
 """
 
 from __future__ import annotations
@@ -74,9 +76,10 @@ def _env(bin_dir: Path) -> dict:
 def _shim(tmp: Path) -> Path:
     bin_dir = tmp / "_bin"
     bin_dir.mkdir()
-    shim = bin_dir / "ovon"
-    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m ovon.cli.main "$@"\n')
-    shim.chmod(0o755)
+    for name, target in (("ovon", f'"{sys.executable}" -m ovon.cli.main'), ("python", f'"{sys.executable}"')):
+        shim = bin_dir / name
+        shim.write_text(f'#!/bin/sh\nexec {target} "$@"\n')
+        shim.chmod(0o755)
     return bin_dir
 
 
@@ -98,6 +101,9 @@ def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: 
         script = cwd / "_block.py"
         script.write_text(code)
         cmd = [sys.executable, str(script)]
+        if saved:
+            cmd = [sys.executable, "-c", "import runpy, sys; runpy.run_path(sys.argv[1], run_name='readme_block')",
+                   str(script)]
     elif lang in ("shell", "bash", "sh", "console"):
         script = cwd / "_block.sh"
         script.write_text(_shell(code))

@@ -84,6 +84,15 @@ def check_agent(name: str, kwargs: dict | None = None) -> None:
 
 
 def make_agent(name: str, **kwargs) -> Agent:
+    """The agent `name` built with `kwargs`; for `remote:HOST:PORT` a connected `RemoteAgent`, `kwargs` being
+    `RemoteConfig` fields (timeout_s, batch, allow_privileged)."""
+    from ovon.agents.remote import is_remote
+
+    if is_remote(name):
+        from ovon.agents.remote import RemoteAgent, RemoteConfig
+        from ovon.config.base import from_dict
+
+        return RemoteAgent(name, from_dict(RemoteConfig, kwargs))
     agent = load_agent_class(name)(**kwargs)
     if not isinstance(agent, Agent):
         raise AgentError(f"agent {name!r} must define reset(episode_info) and act(observation)")

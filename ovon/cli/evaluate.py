@@ -22,7 +22,8 @@ def _csv(s: str) -> list[str]:
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="run an agent over val splits and seeds; resumable")
     p.add_argument("--agent", required=True,
-                   help="random | shortest-path | frontier | policy | vlfm | dagrl-od | pkg.module:Class")
+                   help="random | shortest-path | frontier | policy | vlfm | dagrl-od | pkg.module:Class | "
+                        "remote:HOST:PORT (an agent served by `ovon serve` or ovon_agent.serve)")
     p.add_argument("--agent-arg", action="append", default=[], metavar="KEY=VALUE",
                    help="keyword argument for the agent's constructor (repeatable)")
     p.add_argument("--checkpoint", help="policy checkpoint (for --agent policy and dagrl-od)")
