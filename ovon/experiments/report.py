@@ -19,7 +19,7 @@ from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
 from ovon.experiments.definitions import Experiment, paper_numbers, parse_ref, row_eval
 from ovon.experiments.findings import RULE_NOTE, judge
-from ovon.experiments.plan import PERCEPTION, Cell, Plan, flat_set, render_value
+from ovon.experiments.plan import PERCEPTION, Cell, Plan, render_value
 from ovon.experiments.provenance import (
     MARK,
     cell_provenance,
@@ -39,6 +39,7 @@ from ovon.experiments.state import (
     read_record,
     shell_word,
 )
+from ovon.runfolder import flatten
 
 
 # ----- what the cells hold ---------------------------------------------------------------------------
@@ -203,8 +204,8 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
 
 def run_command_line(plan: Plan) -> str:
     """The `ovon experiment run` that makes every cell of the report: its scale overrides included."""
-    default = flat_set(to_dict(plan.catalogue.scales[plan.scale.name]))
-    now = flat_set(to_dict(plan.scale))
+    default = flatten(to_dict(plan.catalogue.scales[plan.scale.name]))
+    now = flatten(to_dict(plan.scale))
     sets = [f"{k}={render_value(v)}" for k, v in now.items() if default.get(k, object()) != v]
     words = ["ovon", "experiment", "run", ",".join(e.name for e in plan.experiments), "--scale", plan.scale.name,
              "--root", ROOT_TOKEN, *(w for kv in sets for w in ("--set", portable_text(plan, kv)))]
