@@ -38,10 +38,12 @@ class PPOConfig:
     # policy that is evaluated at temperature 0.5 (README) should be trained at 0.5 too: at 1 its rollouts
     # rarely succeed, the sparse reward gives no signal and the policy drifts away from what worked.
     temperature: float = positive(1.0)
-    # A transformer acts with a sliding window of `policy.context` steps that crosses rollout chunks; the
-    # update re-reads each chunk with the `context - 1` steps before it (no loss on them), so the logits it
-    # optimises are the ones the actions were sampled from. false: the chunk alone (shorter context for
-    # episodes that began before it; the update then optimises another policy than the one that acted).
+    # A transformer acts with a key/value cache of `policy.context` steps per layer that crosses rollout
+    # chunks; each cached key was computed from its own step's window, so acting sees layers x (context - 1)
+    # steps back. The update re-reads each chunk after that many earlier steps (no loss on them), so the
+    # logits it optimises are the ones the actions were sampled from (costs layers x context extra steps of
+    # forward/backward per chunk). false: the chunk alone (the update then optimises a shorter-context
+    # policy than the one that acted).
     context_prefix: bool = True
 
 

@@ -12,8 +12,9 @@ initial policy.
 Sequences: each update collects `rollout_steps` steps per env (`ovon.train.collect`). Old log-probs and
 values are recomputed by one forward pass over the rollout chunk (the same context the update sees);
 `behaviour_kl` logs how far that is from the log-probs the actions were sampled with (0 when acting and
-the update see the same context). Minibatches split the envs, keeping whole sequences; an LSTM starts
-each chunk from its acting state at the chunk's start.
+the update see the same context: a transformer's update re-reads the chunk after the layers x (context - 1)
+steps before it, the receptive field of KV-cached acting). Minibatches split the envs, keeping whole
+sequences; an LSTM starts each chunk from its acting state at the chunk's start.
 """
 
 from __future__ import annotations
@@ -99,7 +100,10 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
         model = dist.wrap(policy, run.info)
         n_envs, T = cfg.num_envs, cfg.rollout_steps
-        prefix = policy.cfg.context - 1 if policy.cfg.core == "transformer" and pc.context_prefix else 0
+        # A KV-cached transformer's receptive field is layers x (context - 1) steps: each layer's keys were
+        # computed when their step was acted, from that step's own window.
+        transformer = policy.cfg.core == "transformer" and pc.context_prefix
+        prefix = policy.cfg.layers * (policy.cfg.context - 1) if transformer else 0
         collector = RolloutCollector(envs, batch, policy, dev, prefix=prefix)
         gate_open = ft.critic_warmup_ev <= 0  # the explained-variance gate of the actor (latched)
         saved = run.restore(optimizer)
