@@ -12,8 +12,11 @@ from ovon.atomic import atomic_write_text
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a learned baseline (bc | dagger | ppo); works under torchrun")
     p.add_argument("--algo", choices=["bc", "dagger", "ppo"], required=True)
+    p.add_argument("--task", choices=["objectnav", "pointnav"], default="objectnav",
+                   help="objectnav (goal text) or pointnav (goal point from odometry; PPO, --procedural houses); "
+                        "picks that task's version of --preset")
     p.add_argument("--policy", choices=["transformer", "lstm"], default=None, help="policy core (default: preset)")
-    p.add_argument("--encoder", choices=["oracle-vl", "siglip", "cnn"], default=None,
+    p.add_argument("--encoder", choices=["oracle-vl", "siglip", "cnn", "depth-grid"], default=None,
                    help="image encoder (default: preset; oracle-vl is ORACLE PERCEPTION)")
     p.add_argument("--expert", choices=["frontier", "shortest-path"], default=None,
                    help="expert for BC recording / DAgger labels (default: frontier)")
@@ -40,7 +43,9 @@ def build_config(args):
     changes: dict = {"algo": args.algo}
     if args.expert:
         changes["expert"] = args.expert
-    preset = train_preset(args.preset, **changes)
+    if args.task == "pointnav" and args.algo != "ppo":
+        raise ValueError(f"--task pointnav trains with --algo ppo, not {args.algo!r} (there is no PointNav expert)")
+    preset = train_preset(args.preset, args.task, **changes)
     if args.policy:
         preset = dataclasses.replace(preset, policy=dataclasses.replace(preset.policy, core=args.policy))
     if args.encoder:
@@ -49,6 +54,14 @@ def build_config(args):
 
 
 def episode_list(args):
+    if args.task == "pointnav":
+        if not args.procedural or args.data:
+            raise ValueError("--task pointnav samples its episodes in procedural houses: pass --procedural SEEDS "
+                             "(e.g. 0-23) and no --data")
+        from ovon.task.pointgoal import pointnav_specs
+        from ovon.train.episodes import parse_seed_list
+
+        return pointnav_specs([f"procedural:{s}" for s in parse_seed_list(args.procedural)])
     if args.procedural:
         from ovon.train.episodes import adhoc_specs, parse_seed_list
 

@@ -65,6 +65,7 @@ class EpisodeTracker:
     cfg: TaskConfig = field(default_factory=TaskConfig)
     distractors: list[Distractor] = field(default_factory=list)
     coverage: object = None  # ovon.task.coverage.Coverage when the reward has an exploration term
+    goal_known: bool = False  # PointNav: the goal is given, so it counts as seen from the start
 
     def reset(self, position: np.ndarray, semantic: np.ndarray | None = None, yaw: float | None = None) -> None:
         self.position = np.asarray(position, dtype=np.float64).copy()
@@ -79,7 +80,7 @@ class EpisodeTracker:
         self.collisions = 0
         self.last_collided = False
         self.called_stop = False
-        self.goal_seen = False
+        self.goal_seen = self.goal_known
         self.in_region = self.distance < self.cfg.success_distance
         self.entered_region = self.in_region
         self.left_region = False

@@ -12,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import ClassVar, Literal
 
-from ovon.config.base import Pattern, constrained, in_range, less, non_negative, positive
+from ovon.config.base import Pattern, constrained, in_range, less, non_negative, positive, rule
 from ovon.config.sim import CameraConfig, SimConfig
 from ovon.config.task import RewardConfig, TaskConfig
 from ovon.experts.config import FrontierExpertConfig, ShortestPathExpertConfig
@@ -146,7 +146,14 @@ class TrainConfig:
     keep_checkpoints: int = non_negative(3)  # numbered policy snapshots kept besides the latest
     text_cache: str = ""  # .pt table {text: embedding}; "" = <out>/text_cache.pt
     progress: bool = True
-    rules: ClassVar = (less("ppo.minibatches", "num_envs", strict=False),)  # a minibatch holds whole envs
+    rules: ClassVar = (
+        less("ppo.minibatches", "num_envs", strict=False),  # a minibatch holds whole envs
+        rule(("task.kind", "algo"), lambda k, a: k != "pointnav" or a == "ppo",
+             "algo ppo for task.kind pointnav (there is no PointNav expert)"),
+        rule(("task.kind", "encoder.image", "policy.goal_similarity"),
+             lambda k, i, g: k != "pointnav" or (i == "depth-grid" and not g),
+             "encoder.image depth-grid and policy.goal_similarity false for task.kind pointnav"),
+    )
 
 
 def _paper() -> TrainConfig:
@@ -213,14 +220,54 @@ def _tiny() -> TrainConfig:
     )
 
 
+def _pointnav(scale: str) -> TrainConfig:
+    """PointNav with PPO (`ovon train --task pointnav`): depth + the goal vector from odometry.
+
+    Why these values (see the README, "Learned PointNav"): the depth-grid encoder (coarse depth + bump
+    flag, ~65 numbers) instead of a CNN, because on a 2-core CPU the env steps are the budget and a CNN's
+    forward/backward would halve them; the camera of the cpu-small policies and of the modular agents'
+    measurements (72x128 portrait, 42 deg) so the learned navigator sees in VLFM what it trained on; no
+    camera tilt; success within 0.36 m (2 agent radii, habitat's PointNav challenge; habitat's original
+    PointNav used 0.2 m, VLFM stops within 0.9 m of a goal point and its navigator keeps that radius);
+    habitat's dense reward (success 2.5, minus the change of geodesic distance, slack -0.01); PPO as
+    DD-PPO's PointNav (lr 2.5e-4, 2 minibatches, 4 epochs, clip 0.2, entropy 0.01)."""
+    base = _tiny() if scale == "tiny" else TrainConfig()
+    task = TaskConfig(kind="pointnav", max_steps=150, success_distance=0.36, point_min_distance_m=1.0,
+                      point_max_distance_m=6.0)
+    encoder = EncoderConfig(image="depth-grid", oracle_depth_grid=(8, 4), oracle_collision=True)
+    policy = PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=32, prev_action_dim=16, num_actions=4,
+                          stop_bias=-3.0)
+    sim = SimConfig(camera=CameraConfig(width=72, height=128, rgb=False))
+    ppo = PPOConfig(epochs=4, minibatches=2)
+    if scale == "tiny":
+        return dataclasses.replace(base, algo="ppo", task=dataclasses.replace(task, max_steps=30), encoder=encoder,
+                                   policy=dataclasses.replace(policy, hidden=32, heads=2, mlp=64, context=16),
+                                   sim=SimConfig(camera=CameraConfig(width=36, height=64, rgb=False)),
+                                   ppo=PPOConfig(epochs=1, minibatches=2))
+    if scale == "paper":
+        return dataclasses.replace(base, algo="ppo", task=task, encoder=encoder, policy=policy, lr=2.5e-4, ppo=ppo,
+                                   rollout_steps=128, total_steps=100_000_000)
+    return dataclasses.replace(
+        base, algo="ppo", task=task, encoder=encoder, policy=policy, sim=sim, ppo=ppo,
+        num_envs=16, env_workers=2, rollout_steps=64, scene_repeat=64,
+        total_steps=5_000_000, max_updates=0, lr=2.5e-4, max_grad_norm=0.5, threads=1, checkpoint_every=20,
+        keep_checkpoints=3)
+
+
 PRESETS = {"paper": _paper, "cpu-small": _cpu_small, "tiny": _tiny}
+POINTNAV_PRESETS = {name: (lambda n=name: _pointnav(n)) for name in PRESETS}
+TASKS = ("objectnav", "pointnav")
 
 
-def train_preset(name: str, **changes: object) -> TrainConfig:
-    """Named preset (+ top-level field changes); an unknown name lists the valid ones."""
-    if name not in PRESETS:
-        raise KeyError(f"unknown train preset {name!r}; valid: {sorted(PRESETS)}")
-    return dataclasses.replace(PRESETS[name](), **changes)
+def train_preset(name: str, task: str = "objectnav", **changes: object) -> TrainConfig:
+    """Named preset of a task (+ top-level field changes); an unknown name lists the valid ones. PointNav
+    presets share the ObjectNav presets' names and scales."""
+    if task not in TASKS:
+        raise KeyError(f"unknown task {task!r}; valid: {list(TASKS)}")
+    presets = POINTNAV_PRESETS if task == "pointnav" else PRESETS
+    if name not in presets:
+        raise KeyError(f"unknown train preset {name!r}; valid: {sorted(presets)}")
+    return dataclasses.replace(presets[name](), **changes)
 
 
 def reward_for(cfg: TrainConfig, finetune: bool) -> TaskConfig:
