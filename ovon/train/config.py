@@ -229,11 +229,14 @@ def _pointnav(scale: str) -> TrainConfig:
     measurements (72x128 portrait, 42 deg) so the learned navigator sees in VLFM what it trained on; no
     camera tilt; success within 0.36 m (2 agent radii, habitat's PointNav challenge; habitat's original
     PointNav used 0.2 m, VLFM stops within 0.9 m of a goal point and its navigator keeps that radius);
-    habitat's dense reward (success 2.5, minus the change of geodesic distance, slack -0.01); PPO as
+    habitat's dense reward (success 2.5, minus the change of geodesic distance, slack -0.01) with a cost for
+    a STOP outside the success radius (below); PPO as
     DD-PPO's PointNav (lr 2.5e-4, 2 minibatches, 4 epochs, clip 0.2, entropy 0.01)."""
     base = _tiny() if scale == "tiny" else TrainConfig()
+    # A failed STOP costs 1 (habitat: 0): without it PPO collapsed to STOP-at-once here (mean episode length
+    # 33 -> 6 steps within 10 updates), since a STOP ends the slack and the random walk's distance losses.
     task = TaskConfig(kind="pointnav", max_steps=150, success_distance=0.36, point_min_distance_m=1.0,
-                      point_max_distance_m=6.0)
+                      point_max_distance_m=6.0, reward=RewardConfig(dense_failed_stop=-1.0))
     encoder = EncoderConfig(image="depth-grid", oracle_depth_grid=(8, 4), oracle_collision=True)
     policy = PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=32, prev_action_dim=16, num_actions=4,
                           stop_bias=-3.0)

@@ -10,8 +10,9 @@
 the goal (STOP within `stop_distance_m`) or a frontier waypoint, and the agent's own maps. `act` returns
 an action, or None when the target cannot be reached (the caller chooses another).
 
-Implementations (`NavigatorConfig.kind`): "geometric" (default), or "package.module:Class" constructed as
-`Class(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors)`, e.g. a learned PointNav policy.
+Implementations (`NavigatorConfig.kind`): "geometric" (default), "learned" (a PointNav policy trained by
+`ovon train --task pointnav`: ovon.agents.modular.learned_navigator), or "package.module:Class"
+constructed as `Class(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors)`.
 """
 
 from __future__ import annotations
@@ -208,6 +209,10 @@ class GeometricNavigator:
 def make_navigator(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors) -> PointGoalNavigator:
     if cfg.kind == "geometric":
         return GeometricNavigator(cfg, maps, sensors)
+    if cfg.kind == "learned":
+        from ovon.agents.modular.learned_navigator import LearnedNavigator
+
+        return LearnedNavigator(cfg, maps, sensors)
     if is_spec(cfg.kind):
         return load_class(cfg.kind, "navigator.kind", "geometric or package.module:Class")(cfg, maps, sensors)
-    raise ValueError(f"navigator.kind = {cfg.kind!r} is unknown; use geometric or package.module:Class")
+    raise ValueError(f"navigator.kind = {cfg.kind!r} is unknown; use geometric, learned or package.module:Class")

