@@ -66,8 +66,9 @@ def test_an_impossible_range_is_refused(tiny_cfg) -> None:
 
 def test_goal_vector_by_hand() -> None:
     # turned 90 deg left after 1 m forward: a goal 1 m forward and 2 m left of the start is 2 m straight ahead
-    np.testing.assert_allclose(point_goal_vector(np.array([1.0, 0.0, math.pi / 2]), np.array([1.0, 2.0])),
-                               [2.0, 1.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(
+        point_goal_vector(np.array([1.0, 0.0, math.pi / 2]), np.array([1.0, 2.0])), [2.0, 1.0, 0.0], atol=1e-6
+    )
     # at the start: a goal 1 m to the left is at theta = +90 deg
     np.testing.assert_allclose(point_goal_vector(np.zeros(3), np.array([0.0, 1.0])), [1.0, 0.0, 1.0], atol=1e-6)
     # behind and to the right
@@ -103,8 +104,9 @@ def test_goal_vector_follows_the_true_pose_without_noise(tiny_cfg) -> None:
         d = goal - s.position
         f = heading_vector(s.yaw)
         fwd, left = float(d @ f), float(d @ np.array([f[2], 0.0, -f[0]]))
-        np.testing.assert_allclose(obs["pointgoal"], goal_vector(math.hypot(fwd, left), math.atan2(left, fwd)),
-                                   atol=1e-4)
+        np.testing.assert_allclose(
+            obs["pointgoal"], goal_vector(math.hypot(fwd, left), math.atan2(left, fwd)), atol=1e-4
+        )
     env.close()
 
 
@@ -119,8 +121,9 @@ def test_success_radius(tiny_cfg, radius: float, success: bool) -> None:
     grid, _, goal, field = sample_point_goal(world.nav.floors, np.random.default_rng(0), task)
     rows, cols = np.nonzero(grid.navigable & (np.abs(field.dist - 0.3) < 0.02))
     start = grid.cell_to_world(int(rows[0]), int(cols[0]))
-    spec = EpisodeSpec("fixed", SCENE, POINT_GOAL, start_position=start, start_yaw=0.0,
-                       viewpoints=[GoalViewpoint(goal, 0.0)])
+    spec = EpisodeSpec(
+        "fixed", SCENE, POINT_GOAL, start_position=start, start_yaw=0.0, viewpoints=[GoalViewpoint(goal, 0.0)]
+    )
     env = _env(tiny_cfg, task)
     env.reset(seed=0, options={"episode": spec})
     assert abs(env.tracker.d0 - 0.3) < 0.05
@@ -170,8 +173,24 @@ def tiny_policy(tmp_path_factory) -> Path:
     from ovon.cli.main import main
 
     out = tmp_path_factory.mktemp("pointnav") / "run"
-    assert main(["train", "--algo", "ppo", "--task", "pointnav", "--preset", "tiny", "--procedural", "0-1",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "ppo",
+                "--task",
+                "pointnav",
+                "--preset",
+                "tiny",
+                "--procedural",
+                "0-1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return out / "policy.pt"
 
 
@@ -180,8 +199,24 @@ def test_cli_refuses_pointnav_without_houses_or_with_an_expert(tmp_path: Path, c
 
     assert main(["train", "--algo", "ppo", "--task", "pointnav", "--preset", "tiny", "--out", str(tmp_path / "a")]) == 2
     assert "--procedural" in capsys.readouterr().err
-    assert main(["train", "--algo", "dagger", "--task", "pointnav", "--preset", "tiny", "--procedural", "0",
-                 "--out", str(tmp_path / "b")]) == 2
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "dagger",
+                "--task",
+                "pointnav",
+                "--preset",
+                "tiny",
+                "--procedural",
+                "0",
+                "--out",
+                str(tmp_path / "b"),
+            ]
+        )
+        == 2
+    )
     assert "ppo" in capsys.readouterr().err
 
 
@@ -190,13 +225,30 @@ def test_evaluate_pointnav_on_held_out_houses(tmp_path: Path, tiny_policy: Path,
 
     from ovon.cli.main import main
 
-    args = ["evaluate", "--task", "pointnav", "--procedural", "80000", "--episodes", "2", "--agent", "policy",
-            "--checkpoint", str(tiny_policy), "--workers", "1", "--no-progress"]
+    args = [
+        "evaluate",
+        "--task",
+        "pointnav",
+        "--procedural",
+        "80000",
+        "--episodes",
+        "2",
+        "--agent",
+        "policy",
+        "--checkpoint",
+        str(tiny_policy),
+        "--workers",
+        "1",
+        "--no-progress",
+    ]
     assert main([*args, "--out", str(tmp_path / "a")]) == 0
     recs = [json.loads(x) for x in (tmp_path / "a" / "episodes.jsonl").read_text().splitlines()]
     assert len(recs) == 2 and {r["scene"] for r in recs} == {"procedural:80000"} and recs[0]["split"] == "val"
     task = json.loads((tmp_path / "a" / "run.json").read_text())["task"]
-    assert task["kind"] == "pointnav" and task["success_distance"] == train_preset("tiny", "pointnav").task.success_distance
+    assert (
+        task["kind"] == "pointnav"
+        and task["success_distance"] == train_preset("tiny", "pointnav").task.success_distance
+    )
     # the same episodes for another agent: same start distances
     assert main([*args[:7], "--agent", "random", "--workers", "1", "--no-progress", "--out", str(tmp_path / "b")]) == 0
     recs_b = [json.loads(x) for x in (tmp_path / "b" / "episodes.jsonl").read_text().splitlines()]
@@ -228,8 +280,11 @@ def test_learned_navigator_acts_inside_vlfm(tiny_policy: Path) -> None:
     assert isinstance(agent.core.navigator, LearnedNavigator)
     assert rec["steps"] > agent.cfg.spin_steps and all(0 <= a <= 3 for a in rec["actions"])
     # a camera of another aspect ratio is refused in one line
-    wide = PrivilegedInfo(ObjectNavEnv(episodes=[spec], sim=SimConfig(camera=CameraConfig(width=64, height=36)),
-                                       task=TaskConfig(max_steps=5)))
+    wide = PrivilegedInfo(
+        ObjectNavEnv(
+            episodes=[spec], sim=SimConfig(camera=CameraConfig(width=64, height=36)), task=TaskConfig(max_steps=5)
+        )
+    )
     with pytest.raises(ValueError, match="camera"):
         run_episode(wide, VLFMAgent(navigator="learned", **{"navigator.checkpoint": str(tiny_policy)}), spec, 0)
     env.close()
@@ -253,8 +308,11 @@ def test_learned_navigator_stops_at_the_callers_radius(tiny_policy: Path) -> Non
     from ovon.agents.modular.sensors import Pose2D, Sensors
     from ovon.config.sim import AgentConfig, CameraConfig
 
-    nav = LearnedNavigator(NavigatorConfig(kind="learned", checkpoint=str(tiny_policy)), None,
-                           Sensors(CameraConfig(width=36, height=64), AgentConfig()))
+    nav = LearnedNavigator(
+        NavigatorConfig(kind="learned", checkpoint=str(tiny_policy)),
+        None,
+        Sensors(CameraConfig(width=36, height=64), AgentConfig()),
+    )
     obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
     assert nav.act(obs, NavRequest(Pose2D(0, 0, 0), (0.0, -0.5), "goal", None)) == 0  # within 0.9 m
     for _ in range(5):  # never STOPs on its own further away (the caller's radius decides)

@@ -53,6 +53,13 @@ def register(sub) -> None:
     r.add_argument("--out", help="report folder (default: <first run>/report)")
     r.set_defaults(func=cmd_report)
 
+    c = sub.add_parser("curve", help="learning curve of training runs (SR vs env steps) as a PNG")
+    c.add_argument("runs", nargs="+", help="run folders written by ovon train")
+    c.add_argument("--metric", default="episode/success", help="a metrics.jsonl key (default: episode/success)")
+    c.add_argument("--window", default=10, help="updates averaged per point (episode-weighted)")
+    c.add_argument("--out", required=True, help="PNG file")
+    c.set_defaults(func=cmd_curve)
+
     v = sub.add_parser("video", help="render an evaluated episode to mp4")
     v.add_argument("--run", required=True)
     v.add_argument("--episode", required=True)
@@ -206,6 +213,22 @@ def cmd_report(args) -> int:
     path = build_report(list(a.runs), out)
     print(path.read_text().split("## Failure breakdown")[0], end="")
     print(f"report: {path}")
+    return 0
+
+
+@dataclass(frozen=True)
+class CurveArgs:
+    runs: tuple[str, ...] = non_empty((), each=ExistingDir(), distinct=True, flag="RUNS")
+    window: int = in_range(10, 1, 100_000, flag="--window")
+    metric: str = non_empty("episode/success", flag="--metric")
+
+
+def cmd_curve(args) -> int:
+    from ovon.reports.plots import plot_learning_curves
+
+    a = from_args(CurveArgs, args, runs=tuple(args.runs))
+    path = plot_learning_curves(list(a.runs), args.out, a.metric, a.window)
+    print(f"curve: {path}")
     return 0
 
 

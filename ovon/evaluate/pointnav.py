@@ -83,8 +83,7 @@ def evaluate_pointnav(cfg: PointNavEvalConfig, run_dir: str | Path, progress: bo
         if p.is_file():
             inputs["checkpoint"] = {"sha256": file_sha256(p)}
     name = cfg.name or cfg.agent
-    with RunFolder.open(run_dir, "evaluate", to_dict(cfg), inputs, may_change=MAY_CHANGE,
-                        markers=("episodes.jsonl",)):
+    with RunFolder.open(run_dir, "evaluate", to_dict(cfg), inputs, may_change=MAY_CHANGE, markers=("episodes.jsonl",)):
         atomic_write_text(run_dir / "run.json", json.dumps({**to_dict(cfg), "name": name}, indent=2))
         done = {record_key(r) for r in read_records(run_dir, repair=True)}
         shim = EvalConfig.__new__(EvalConfig)  # the harness's unit builder reads only these fields
@@ -93,8 +92,9 @@ def evaluate_pointnav(cfg: PointNavEvalConfig, run_dir: str | Path, progress: bo
         units = _units(shim, {SPLIT: specs}, done)
         writer = RecordWriter(run_dir)
         try:
-            with progress_bar(f"evaluate {name} (pointnav)", sum(len(u["specs"]) for u in units),
-                              progress and bool(units)) as bar:
+            with progress_bar(
+                f"evaluate {name} (pointnav)", sum(len(u["specs"]) for u in units), progress and bool(units)
+            ) as bar:
                 for recs in run_jobs(run_unit, units, cfg.workers, cfg.executor):
                     for r in recs:
                         writer.write(r)
@@ -106,5 +106,6 @@ def evaluate_pointnav(cfg: PointNavEvalConfig, run_dir: str | Path, progress: bo
 
 
 def with_camera(cfg: PointNavEvalConfig, camera: dict) -> PointNavEvalConfig:
-    return dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, camera=dataclasses.replace(cfg.sim.camera,
-                                                                                                 **camera)))
+    return dataclasses.replace(
+        cfg, sim=dataclasses.replace(cfg.sim, camera=dataclasses.replace(cfg.sim.camera, **camera))
+    )

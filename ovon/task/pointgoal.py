@@ -48,8 +48,11 @@ def point_goal_vector(odometry: np.ndarray, goal_forward_left: np.ndarray) -> np
     return goal_vector(math.hypot(fwd, lft), math.atan2(lft, fwd))
 
 
-def sample_point_goal(grids: Sequence, rng: np.random.Generator, task: TaskConfig,
-                      ) -> tuple[object, np.ndarray, np.ndarray, DistanceField]:
+def sample_point_goal(
+    grids: Sequence,
+    rng: np.random.Generator,
+    task: TaskConfig,
+) -> tuple[object, np.ndarray, np.ndarray, DistanceField]:
     """(grid, start, goal, field to the goal): a goal uniform on a floor's navigable area (start islands,
     not furniture tops), a start uniform among the cells whose geodesic distance to it lies in
     [point_min_distance_m, point_max_distance_m]. ValueError when no floor has such a pair."""
@@ -72,12 +75,17 @@ def sample_point_goal(grids: Sequence, rng: np.random.Generator, task: TaskConfi
         start = grid.cell_to_world(r, c)
         if lo <= field.distance(start) <= hi:
             return grid, start, goal, field
-    raise ValueError(f"no start within {lo}-{hi} m (geodesic) of a goal in {SAMPLE_TRIES} tries; "
-                     "fix: widen task.point_min_distance_m / task.point_max_distance_m")
+    raise ValueError(
+        f"no start within {lo}-{hi} m (geodesic) of a goal in {SAMPLE_TRIES} tries; "
+        "fix: widen task.point_min_distance_m / task.point_max_distance_m"
+    )
 
 
 def pointnav_specs(scene_ids: Sequence[str], per_scene: int = 1, split: str = "train") -> list[EpisodeSpec]:
     """`per_scene` PointNav episodes per scene; start and goal are sampled at reset from the episode's
     seed, so an evaluation seed fixes every pair and every agent sees the same ones."""
-    return [EpisodeSpec(episode_id=f"pointnav-{i}", scene=str(s), goal_category=POINT_GOAL, split=split)
-            for s in scene_ids for i in range(per_scene)]
+    return [
+        EpisodeSpec(episode_id=f"pointnav-{i}", scene=str(s), goal_category=POINT_GOAL, split=split)
+        for s in scene_ids
+        for i in range(per_scene)
+    ]

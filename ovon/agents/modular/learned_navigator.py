@@ -34,8 +34,10 @@ def load_pointnav_policy(checkpoint: str):
     policy = ActorCritic.load(path).eval()
     extra = getattr(policy, "checkpoint_extra", {}) or {}
     if (extra.get("task") or {}).get("kind") != "pointnav":
-        raise ValueError(f"navigator.checkpoint = {checkpoint!r} is not a PointNav policy; fix: pass the policy.pt "
-                         "of `ovon train --task pointnav`")
+        raise ValueError(
+            f"navigator.checkpoint = {checkpoint!r} is not a PointNav policy; fix: pass the policy.pt "
+            "of `ovon train --task pointnav`"
+        )
     return policy, extra
 
 
@@ -52,12 +54,15 @@ class LearnedNavigator:
         cam = extra.get("camera") or {}
         hfov, w, h = cam.get("hfov_deg"), cam.get("width"), cam.get("height")
         have = sensors.camera
-        if hfov is not None and (abs(float(hfov) - have.hfov_deg) > 1e-3
-                                 or abs(w / h - have.width / have.height) > 0.02 * (w / h)):
-            raise ValueError(f"navigator.checkpoint {cfg.checkpoint!r} was trained with a {w}x{h} camera of "
-                             f"{hfov} deg HFOV; this episode's camera is {have.width}x{have.height}, "
-                             f"{have.hfov_deg} deg; fix: evaluate with the same HFOV and aspect ratio "
-                             "(e.g. --set sim.camera.width=W --set sim.camera.height=H)")
+        if hfov is not None and (
+            abs(float(hfov) - have.hfov_deg) > 1e-3 or abs(w / h - have.width / have.height) > 0.02 * (w / h)
+        ):
+            raise ValueError(
+                f"navigator.checkpoint {cfg.checkpoint!r} was trained with a {w}x{h} camera of "
+                f"{hfov} deg HFOV; this episode's camera is {have.width}x{have.height}, "
+                f"{have.hfov_deg} deg; fix: evaluate with the same HFOV and aspect ratio "
+                "(e.g. --set sim.camera.width=W --set sim.camera.height=H)"
+            )
         self.reset()
 
     def reset(self) -> None:
@@ -77,8 +82,10 @@ class LearnedNavigator:
             self.prev = torch.full((1,), -1, dtype=torch.long)
             self.first = True
         self.target, self.kind = (float(t[0]), float(t[1])), request.kind
-        batch = {"depth": np.asarray(observation["depth"], np.float32)[None],
-                 "collided": np.array([int(observation.get("collided", 0))])}
+        batch = {
+            "depth": np.asarray(observation["depth"], np.float32)[None],
+            "collided": np.array([int(observation.get("collided", 0))]),
+        }
         image = self.encoder.encode(batch).float()
         goal = torch.from_numpy(goal_vector(request.rho, request.theta))[None]
         obs = self.policy.make_obs(image, goal)

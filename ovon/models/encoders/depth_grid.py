@@ -34,8 +34,10 @@ class DepthGridEncoder:
 
     def __init__(self, grid: tuple[int, int], max_depth: float = 5.0, collision: bool = True) -> None:
         if grid[0] < 1 or grid[1] < 1:
-            raise ValueError(f"depth-grid encoder needs a grid of at least 1x1 cells, got {grid}; set "
-                             "encoder.oracle_depth_grid=[rows,cols]")
+            raise ValueError(
+                f"depth-grid encoder needs a grid of at least 1x1 cells, got {grid}; set "
+                "encoder.oracle_depth_grid=[rows,cols]"
+            )
         self.grid = (int(grid[0]), int(grid[1]))
         self.max_depth = float(max_depth)
         self.collision = bool(collision)
