@@ -129,6 +129,7 @@ def test_success_radius(tiny_cfg, radius: float, success: bool) -> None:
     assert abs(env.tracker.d0 - 0.3) < 0.05
     _, reward, terminated, _, info = env.step(0)
     assert terminated and info["metrics"]["success"] is success
+    assert info["metrics"]["failure"] == (None if success else "stop_too_far")
     r = task.reward
     assert reward == pytest.approx(r.dense_success if success else r.dense_failed_stop + r.dense_slack)
     env.close()

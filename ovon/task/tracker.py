@@ -159,8 +159,9 @@ class EpisodeTracker:
         if not self.called_stop:
             if self.left_region:
                 return "timeout_left_goal"
-            # Inside the success region at timeout counts as "ignored": it had the goal, never stopped.
-            if self.goal_seen or self.entered_region:
+            # Inside the success region at timeout counts as "ignored": it had the goal, never stopped. A point
+            # goal is always "seen" (given), so there only entering the region counts.
+            if (self.goal_seen and not self.goal_known) or self.entered_region:
                 return "timeout_ignored_goal"
             return "timeout_missed_goal"
         # Only an object in view at the STOP counts (last frame, seen threshold): one glimpsed earlier
