@@ -316,5 +316,8 @@ def test_learned_navigator_stops_at_the_callers_radius(tiny_policy: Path) -> Non
     )
     obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
     assert nav.act(obs, NavRequest(Pose2D(0, 0, 0), (0.0, -0.5), "goal", None)) == 0  # within 0.9 m
-    for _ in range(5):  # never STOPs on its own further away (the caller's radius decides)
-        assert nav.act(obs, NavRequest(Pose2D(0, 0, 0), (0.0, -3.0), "goal", None)) in (1, 2, 3)
+    far = NavRequest(Pose2D(0, 0, 0), (0.0, -3.0), "goal", None)
+    acts = [nav.act(obs, far) for _ in range(8)]
+    assert set(acts) <= {1, 2, 3}  # never STOPs on its own further away (the caller's radius decides)
+    nav.reset()
+    assert [nav.act(obs, far) for _ in range(8)] == acts  # sampled, but seeded per episode

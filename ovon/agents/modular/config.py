@@ -80,6 +80,9 @@ class NavigatorConfig:
     # learned: the policy's memory restarts when the target moves further than this (a new frontier, or a
     # goal point lifted elsewhere); smaller moves are the same target seen better
     retarget_m: float = 0.5
+    # learned: argmax actions instead of sampling (seeded at each episode's reset, so runs repeat); argmax
+    # locks into turn-left / turn-right cycles more often (PointNav on held-out houses: 62% vs 70% SR)
+    deterministic: bool = False
 
     def __post_init__(self) -> None:
         _positive(self, "navigator", ("stop_distance_m", "turn_threshold_deg", "lookahead_m", "escape_radius_m",

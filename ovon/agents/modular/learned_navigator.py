@@ -6,7 +6,8 @@ and the goal vector (rho, cos theta, sin theta) of the request (`NavRequest.rho`
 The caller decides when to stop: STOP within `stop_distance_m` of a goal point (as the geometric
 navigator); the policy's own STOP is masked, because the caller's radius, not the training radius, ends
 a modular episode, and a frontier is left by the caller. The policy's memory restarts when the target
-moves more than `retarget_m` or changes kind.
+moves more than `retarget_m` or changes kind. Actions are sampled (seeded per episode) unless
+`deterministic`.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ class LearnedNavigator:
         self.reset()
 
     def reset(self) -> None:
+        self.gen = torch.Generator().manual_seed(0)  # the same draws in every episode, whatever the worker
         self.state = self.policy.init_state(1, "cpu")
         self.prev = torch.full((1,), -1, dtype=torch.long)
         self.first = True
@@ -92,7 +94,10 @@ class LearnedNavigator:
         logits, _, self.state = self.policy.act_step(obs, self.prev, self.state, torch.tensor([self.first]))
         logits = logits[0].clone()
         logits[STOP] = -math.inf
-        action = int(logits.argmax().item())
+        if self.cfg.deterministic:
+            action = int(logits.argmax().item())
+        else:
+            action = int(torch.multinomial(torch.softmax(logits.float(), -1), 1, generator=self.gen).item())
         self.prev = torch.tensor([action])
         self.first = False
         return action
