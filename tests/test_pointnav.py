@@ -321,3 +321,19 @@ def test_learned_navigator_stops_at_the_callers_radius(tiny_policy: Path) -> Non
     assert set(acts) <= {1, 2, 3}  # never STOPs on its own further away (the caller's radius decides)
     nav.reset()
     assert [nav.act(obs, far) for _ in range(8)] == acts  # sampled, but seeded per episode
+
+
+def test_curve_png_from_metrics(tmp_path: Path, tiny_policy: Path, capsys) -> None:
+    from ovon.cli.main import main
+    from ovon.reports.plots import learning_curve
+
+    run = tiny_policy.parent
+    assert main(["curve", str(run), "--out", str(tmp_path / "c.png")]) == 0
+    assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+    assert main(["curve", str(run), "--metric", "nope", "--out", str(tmp_path / "d.png")]) == 2
+    assert "nope" in capsys.readouterr().err
+    rows = [
+        {"step": 10, "episode/success": 1.0, "episode/count": 1.0},
+        {"step": 20, "episode/success": 0.0, "episode/count": 3.0},
+    ]
+    assert learning_curve(rows, window=2) == ([10, 20], [1.0, 0.25])  # episode-weighted

@@ -109,7 +109,8 @@ def plot_learning_curves(
         rows = read_metrics(run)
         if not rows:
             raise FileNotFoundError(f"{run}: no metrics.jsonl; fix: pass a run folder written by `ovon train`")
-        if not any(r.get(metric) is not None for r in rows):
+        # an episode metric may be absent only because no episode has ended yet (an empty line)
+        if not metric.startswith("episode/") and not any(r.get(metric) is not None for r in rows):
             keys = sorted({k for r in rows for k in r} - {"update", "step", "time"})
             raise ValueError(f"--metric {metric!r} is not logged in {run}/metrics.jsonl; fix: one of {keys}")
         steps, values = learning_curve(rows, metric, window)
