@@ -38,8 +38,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ovon.config.base import parse_seed_list  # noqa: E402
 from ovon.train.config import train_preset  # noqa: E402
-from ovon.train.episodes import adhoc_specs, parse_seed_list  # noqa: E402
+from ovon.train.episodes import adhoc_specs  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
 from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 

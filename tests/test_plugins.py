@@ -79,5 +79,6 @@ def test_factories_refuse_an_unknown_name_in_one_line(factory: str) -> None:
         from ovon.agents.modular.config import NavigatorConfig
         from ovon.agents.modular.navigation import make_navigator
 
-        with pytest.raises(PluginError, match=r"^navigator.kind = 'nope' is unknown; use one of \['geometric'\]"):
+        expected = r"^navigator.kind = 'nope' is unknown; use one of \['geometric', 'learned'\]"
+        with pytest.raises(PluginError, match=expected):
             make_navigator(NavigatorConfig(kind="nope"), None, None)  # type: ignore[arg-type]

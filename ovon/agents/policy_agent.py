@@ -3,7 +3,8 @@
 Loads an `ActorCritic` checkpoint (`policy.pt` written by `ovon train`, or a run folder holding one),
 rebuilds its perception encoders from the stored encoder config and acts with `act_step` (KV cache /
 LSTM state, reset at each episode). The goal-text table saved with the policy is reused, so the goal
-embeddings match training; unseen texts go to the real text encoder.
+embeddings match training; unseen texts go to the real text encoder. A PointNav policy (trained with
+`--task pointnav`) takes the env's goal vector `observation["pointgoal"]` instead.
 
 With the oracle-vl encoder the agent is privileged: it reads the semantic frame and the scene's
 instance -> category map through `observation["privileged"]` (ORACLE PERCEPTION).
@@ -49,6 +50,7 @@ class PolicyAgent:
 
             self.image_encoder = make_image_encoder(self.encoder_cfg, self.text)
         self.privileged = self.encoder_cfg.image == "oracle-vl"
+        self.pointnav = (extra.get("task") or {}).get("kind") == "pointnav"
         self._gen = torch.Generator().manual_seed(0)
         self._scene_set = False
         self._state = None
@@ -82,7 +84,13 @@ class PolicyAgent:
     def act(self, observation: dict) -> int:
         if self._state is None:
             self.reset({})
-        goal = self.text.encode([observation["goal"]]).to(self.device)
+        if self.pointnav:
+            if "pointgoal" not in observation:
+                raise ValueError("this is a PointNav policy: it needs observation['pointgoal'] (an env with "
+                                 "task.kind=pointnav, e.g. `ovon evaluate --task pointnav`)")
+            goal = torch.as_tensor(np.asarray(observation["pointgoal"], np.float32))[None].to(self.device)
+        else:
+            goal = self.text.encode([observation["goal"]]).to(self.device)
         obs = self.policy.make_obs(self._image(observation).float(), goal)
         first = torch.tensor([self._first], device=self.device)
         logits, _, self._state = self.policy.act_step(obs, self._prev, self._state, first)

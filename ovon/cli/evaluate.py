@@ -27,11 +27,15 @@ def register(sub) -> None:
     p.add_argument("--agent-arg", action="append", default=[], metavar="KEY=VALUE",
                    help="keyword argument for the agent's constructor (repeatable)")
     p.add_argument("--checkpoint", help="policy checkpoint (for --agent policy and dagrl-od)")
-    p.add_argument("--data", required=True, help="episode dataset root (holds val_seen/ ...)")
-    p.add_argument("--scenes", required=True, help="scene-datasets root or the scene dataset folder")
+    p.add_argument("--task", choices=["objectnav", "pointnav"], default="objectnav",
+                   help="pointnav: point goals sampled in --procedural houses (no --data / --scenes)")
+    p.add_argument("--procedural", metavar="SEEDS", help="--task pointnav: house seeds, e.g. 80000-80003")
+    p.add_argument("--data", help="episode dataset root (holds val_seen/ ...); required for objectnav")
+    p.add_argument("--scenes", help="scene-datasets root or the scene dataset folder; required for objectnav")
     p.add_argument("--splits", default=",".join(VAL_SPLITS))
     p.add_argument("--seeds", default="0", help="comma-separated, e.g. 0,1,2")
-    p.add_argument("--episodes", default=None, help="episodes per split (default: all)")
+    p.add_argument("--episodes", default=None, help="episodes per split (default: all); pointnav: per house "
+                   "(default 50)")
     p.add_argument("--noise", default="", help="e.g. actuation,odometry, actuation:movebase*0.5 or odometry:drift "
                    "(default odometry: bounded per reading)")
     p.add_argument("--preset", choices=["auto", "cpu", "paper"], default="auto",
@@ -50,6 +54,13 @@ def register(sub) -> None:
     r.add_argument("runs", nargs="+")
     r.add_argument("--out", help="report folder (default: <first run>/report)")
     r.set_defaults(func=cmd_report)
+
+    c = sub.add_parser("curve", help="learning curve of training runs (SR vs env steps) as a PNG")
+    c.add_argument("runs", nargs="+", help="run folders written by ovon train")
+    c.add_argument("--metric", default="episode/success", help="a metrics.jsonl key (default: episode/success)")
+    c.add_argument("--window", default=10, help="updates averaged per point (episode-weighted)")
+    c.add_argument("--out", required=True, help="PNG file")
+    c.set_defaults(func=cmd_curve)
 
     v = sub.add_parser("video", help="render an evaluated episode to mp4")
     v.add_argument("--run", required=True)
@@ -139,10 +150,44 @@ def eval_config(args) -> EvalConfig:
     return validate(apply_overrides(cfg, args.set))
 
 
+def pointnav_config(args):
+    """The command line as a `PointNavEvalConfig`: the checkpoint's task and camera unless --set says otherwise."""
+    from ovon.config.base import ConfigError, from_dict
+    from ovon.evaluate.pointnav import PointNavEvalConfig, checkpoint_task, with_camera
+
+    if args.data or args.scenes:
+        raise ConfigError("--task pointnav samples episodes in --procedural houses; fix: drop --data / --scenes")
+    if not args.procedural:
+        raise ConfigError("--task pointnav needs --procedural SEEDS (held-out houses, e.g. 80000-80003)")
+    kwargs = _agent_kwargs(args.agent_arg, args.checkpoint)
+    data = {"agent": args.agent, "agent_kwargs": kwargs, "procedural": args.procedural, "seeds": args.seeds,
+            "workers": args.workers, "executor": args.executor, "name": args.name}
+    if args.episodes is not None:
+        data["episodes"] = args.episodes
+    cfg = from_dict(PointNavEvalConfig, data)
+    ckpt = kwargs.get("checkpoint")
+    cfg = dataclasses.replace(cfg, task=checkpoint_task(str(ckpt) if ckpt else None))
+    if args.preset == "paper":
+        cfg = dataclasses.replace(cfg, sim=SimConfig())
+    elif args.preset == "auto" and ckpt:
+        camera = trained_camera(str(ckpt))
+        if camera:
+            cfg = with_camera(cfg, camera)
+    elif args.preset == "cpu":
+        cfg = with_camera(cfg, {"width": 160, "height": 120})
+    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, noise=parse_noise(args.noise)))
+    return validate(apply_overrides(cfg, args.set))
+
+
 def cmd_evaluate(args) -> int:
     from ovon.evaluate.harness import evaluate
 
-    summary = evaluate(eval_config(args), args.out, progress=not args.no_progress)
+    if args.task == "pointnav":
+        from ovon.evaluate.pointnav import evaluate_pointnav
+
+        summary = evaluate_pointnav(pointnav_config(args), args.out, progress=not args.no_progress)
+    else:
+        summary = evaluate(eval_config(args), args.out, progress=not args.no_progress)
     print((Path(args.out) / "table.md").read_text(), end="")
     n = sum(s["episodes"] for s in summary["splits"].values())
     print(f"{n} episodes; run folder: {args.out}")
@@ -170,6 +215,22 @@ def cmd_report(args) -> int:
     path = build_report(list(a.runs), out)
     print(path.read_text().split("## Failure breakdown")[0], end="")
     print(f"report: {path}")
+    return 0
+
+
+@dataclass(frozen=True)
+class CurveArgs:
+    runs: tuple[str, ...] = non_empty((), each=ExistingDir(), distinct=True, flag="RUNS")
+    window: int = in_range(10, 1, 100_000, flag="--window")
+    metric: str = non_empty("episode/success", flag="--metric")
+
+
+def cmd_curve(args) -> int:
+    from ovon.reports.plots import plot_learning_curves
+
+    a = from_args(CurveArgs, args, runs=tuple(args.runs))
+    path = plot_learning_curves(list(a.runs), args.out, a.metric, a.window)
+    print(f"curve: {path}")
     return 0
 
 

@@ -9,8 +9,11 @@ from pathlib import Path
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a learned baseline (bc | dagger | ppo); works under torchrun")
     p.add_argument("--algo", choices=["bc", "dagger", "ppo"], required=True)
+    p.add_argument("--task", choices=["objectnav", "pointnav"], default="objectnav",
+                   help="objectnav (goal text) or pointnav (goal point from odometry; PPO, --procedural houses); "
+                        "picks that task's version of --preset")
     p.add_argument("--policy", choices=["transformer", "lstm"], default=None, help="policy core (default: preset)")
-    p.add_argument("--encoder", choices=["oracle-vl", "siglip", "cnn"], default=None,
+    p.add_argument("--encoder", choices=["oracle-vl", "siglip", "cnn", "depth-grid"], default=None,
                    help="image encoder (default: preset; oracle-vl is ORACLE PERCEPTION)")
     p.add_argument("--expert", choices=["frontier", "shortest-path"], default=None,
                    help="expert for BC recording / DAgger labels (default: frontier)")
@@ -47,7 +50,7 @@ def cmd_train(args) -> int:
     cfg = build_config(args)
     out = Path(args.out)
     source = EpisodeSource(data=args.data, scenes=args.scenes, split=args.split, limit=args.episodes,
-                           procedural=args.procedural)
+                           procedural=args.procedural, task=args.task)
     last = train(cfg, source, out, resume=args.resume, init=args.init)  # opens, checks and locks --out
     if int(os.environ.get("RANK", "0")) == 0:
         shown = {k: round(v, 4) for k, v in last.items() if isinstance(v, float)}

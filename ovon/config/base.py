@@ -670,3 +670,15 @@ def build(
     if overrides:
         cfg = _merge(cfg, parse_overrides(list(overrides)), where="")
     return validate(cfg)
+
+
+def parse_seed_list(text: str) -> list[int]:
+    """`0-3,7` -> [0, 1, 2, 3, 7] (house seeds, `--procedural`)."""
+    out: list[int] = []
+    for part in (p.strip() for p in text.split(",") if p.strip()):
+        a, _, b = part.partition("-")
+        try:
+            out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+        except ValueError:
+            raise ValueError(f"seed list {text!r}: {part!r} is not an integer or a range like 0-7") from None
+    return out

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import ClassVar, Literal
 
-from ovon.config.base import in_range, non_negative, positive
+from ovon.config.base import in_range, less, non_negative, positive
 
 
 @dataclass(frozen=True)
@@ -28,9 +28,25 @@ class RewardConfig:
 
 @dataclass(frozen=True)
 class TaskConfig:
+    # objectnav: reach an instance of the goal text (the paper's task). pointnav: reach a point given in
+    # the start frame, observed as its polar coordinates from odometry (the bee-lining module's task).
+    kind: Literal["objectnav", "pointnav"] = "objectnav"
     max_steps: int = in_range(500, 1, 1_000_000)
     success_distance: float = positive(0.25)
+    # pointnav: start/goal pairs are sampled on one floor's navigable area with a geodesic distance in
+    # [point_min_distance_m, point_max_distance_m].
+    point_min_distance_m: float = positive(1.0)
+    point_max_distance_m: float = positive(6.0)
     # "goal seen" = at least this fraction of the frame shows a goal instance
     seen_fraction: float = in_range(0.01, 0.0, 1.0, lo_open=True)
     wrong_object_distance: float = non_negative(1.0)  # STOP within this of another category's (seen) instance
     reward: RewardConfig = RewardConfig()
+    rules: ClassVar = (less("point_min_distance_m", "point_max_distance_m"),)
+
+
+def pointnav_task() -> TaskConfig:
+    """The PointNav task of the training presets and of `ovon evaluate --task pointnav` without a checkpoint:
+    success within 0.36 m (2 agent radii, habitat's PointNav challenge), 150 steps, goals 1-6 m away, and a
+    failed STOP costs 1 (habitat: 0; without it PPO collapsed to STOP-at-once, README "Learned PointNav")."""
+    return TaskConfig(kind="pointnav", max_steps=150, success_distance=0.36, point_min_distance_m=1.0,
+                      point_max_distance_m=6.0, reward=RewardConfig(dense_failed_stop=-1.0))

@@ -84,7 +84,7 @@ class ObjectNavEnv(gym.Env):
         self._actuation = ActuationNoise.from_name(sim.noise.actuation, sim.noise.actuation_multiplier)
         odo = OdometryNoise(sim.noise.odometry_position_m, sim.noise.odometry_heading_deg)
         self._odometry = Odometry(odo if sim.noise.odometry else None, sim.noise.odometry_mode)
-        self.observation_space = spaces.Dict(observation_spaces(sim))
+        self.observation_space = spaces.Dict(observation_spaces(sim, task))
         self.action_space = spaces.Discrete(6)
         self.spec_episode: EpisodeSpec | None = None
 
@@ -124,6 +124,7 @@ class ObjectNavEnv(gym.Env):
         setup = prepare_episode(world, spec, self.np_random, self.task_cfg, self.sim_cfg.camera.hfov_deg)
         self._state, self._grid, self._field = setup.state, setup.grid, setup.goal_field
         self._viewpoints, self._tracker = setup.viewpoints, setup.tracker
+        self._point_goal = setup.point_goal
         self._kin = Kinematics(self._grid, self.sim_cfg.agent, self._actuation)
         self.spec_episode = spec
         self._frame = self._render()
@@ -148,6 +149,10 @@ class ObjectNavEnv(gym.Env):
         }
         if cam.rgb:
             obs["rgb"] = self._frame.rgb
+        if self.task_cfg.kind == "pointnav":  # from the odometry estimate, as a robot computes it
+            from ovon.task.pointgoal import point_goal_vector
+
+            obs["pointgoal"] = point_goal_vector(odometry, self._point_goal)
         return obs
 
     def step(self, action):
@@ -191,8 +196,9 @@ class ObjectNavEnv(gym.Env):
             self._world = None
 
 
-def observation_spaces(sim: SimConfig) -> dict[str, spaces.Space]:
-    """The plain env's observation spaces (RGB only when the camera renders it)."""
+def observation_spaces(sim: SimConfig, task: TaskConfig | None = None) -> dict[str, spaces.Space]:
+    """The plain env's observation spaces (RGB only when the camera renders it; PointNav adds the goal
+    vector (rho, cos theta, sin theta) relative to the odometry pose)."""
     cam = sim.camera
     obs: dict[str, spaces.Space] = {
         "depth": spaces.Box(0.0, cam.max_depth, (cam.height, cam.width), np.float32),
@@ -206,6 +212,9 @@ def observation_spaces(sim: SimConfig) -> dict[str, spaces.Space]:
         # 1 when the step that led here was blocked (a bump sensor; docs/spec.md#observations)
         "collided": spaces.Discrete(2),
     }
+    if task is not None and task.kind == "pointnav":
+        obs["pointgoal"] = spaces.Box(np.array([0.0, -1.0, -1.0], np.float32),
+                                      np.array([2 * ODOMETRY_LIMIT_M, 1.0, 1.0], np.float32), (3,), np.float32)
     if cam.rgb:
         obs = {"rgb": spaces.Box(0, 255, (cam.height, cam.width, 3), np.uint8), **obs}
     return obs

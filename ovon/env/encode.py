@@ -33,15 +33,18 @@ class EncodeObservation(gym.Wrapper):
         self.text = TableTextEncoder(text_table, encoder)
         self.image_encoder = None if encoder.image == "cnn" else make_image_encoder(encoder, self.text)
         self.oracle = encoder.image == "oracle-vl"
+        inner = env.observation_space.spaces
+        # PointNav: the goal input is the goal vector the env computes from odometry, not a text embedding.
+        self.point = "pointgoal" in inner
         self._scene_key: object = None
         self._goal_text, self._goal = "", np.zeros(0, np.float32)
-        inner = env.observation_space.spaces
         space: dict[str, spaces.Space] = {}
         if self.image_encoder is None:
             space.update({k: inner[k] for k in ("rgb", "depth") if k in inner})
         else:
             space[IMAGE] = spaces.Box(-np.inf, np.inf, (int(self.image_encoder.dim),), np.float32)
-        space[GOAL] = spaces.Box(-np.inf, np.inf, (int(self.text.dim),), np.float32)
+        space[GOAL] = inner["pointgoal"] if self.point else spaces.Box(-np.inf, np.inf, (int(self.text.dim),),
+                                                                           np.float32)
         space.update({k: inner[k] for k in ("collided", "expert_action") if k in inner})
         self.observation_space = spaces.Dict(space)
 
@@ -58,10 +61,13 @@ class EncodeObservation(gym.Wrapper):
             out.update({k: obs[k] for k in ("rgb", "depth") if k in obs})
         else:
             out[IMAGE] = encode_observation(self.image_encoder, obs, semantic)
-        if obs["goal"] != self._goal_text:
-            self._goal_text = obs["goal"]
-            self._goal = self.text.encode([obs["goal"]])[0].numpy()
-        out[GOAL] = self._goal
+        if self.point:
+            out[GOAL] = obs["pointgoal"]
+        else:
+            if obs["goal"] != self._goal_text:
+                self._goal_text = obs["goal"]
+                self._goal = self.text.encode([obs["goal"]])[0].numpy()
+            out[GOAL] = self._goal
         out.update({k: obs[k] for k in ("collided", "expert_action") if k in obs})
         return out
 

@@ -12,7 +12,7 @@ from typing import ClassVar, Literal
 
 from ovon.config.base import Each, Positive, Range, constrained, in_range, non_empty, non_negative, positive, rule
 
-ImageEncoderName = Literal["oracle-vl", "siglip", "cnn"]
+ImageEncoderName = Literal["oracle-vl", "siglip", "cnn", "depth-grid"]
 TextEncoderName = Literal["minilm-text", "siglip-text"]
 
 
@@ -35,7 +35,8 @@ class EncoderConfig:
     # Oracle vision-language encoder (oracle perception).
     oracle_grid: int = in_range(2, 1, 32)  # grid x grid spatial cells
     oracle_global: bool = True  # prepend the whole-frame pooled vector
-    # Append coarse depth (rows, cols); (0, 0) = none.
+    # Append coarse depth (rows, cols); (0, 0) = none. Also the grid of the `depth-grid` encoder (PointNav),
+    # which is this depth part (+ the collision flag with `oracle_collision`) without the semantic part.
     oracle_depth_grid: tuple[int, int] = constrained((0, 0), Each(Range(0, 64)))
     # Append the collision flag of the last step (a bump sensor, not privileged). Low furniture right in
     # front of the agent is below the camera's view, so without it a blocked MOVE_FORWARD looks like a free one.
@@ -52,6 +53,8 @@ class EncoderConfig:
 
     rules: ClassVar = (
         rule(("oracle_depth_grid",), lambda g: (g[0] == 0) == (g[1] == 0), "oracle_depth_grid both 0 or both > 0"),
+        rule(("image", "oracle_depth_grid"), lambda i, g: i != "depth-grid" or g[0] > 0,
+             "oracle_depth_grid > 0 for the depth-grid encoder"),
     )
 
 
@@ -109,6 +112,7 @@ def _encoder_presets() -> dict[str, EncoderConfig]:
         "paper": EncoderConfig(image="siglip", text="siglip-text"),
         "tiny": EncoderConfig(oracle_grid=1, oracle_global=False),
         "cnn": EncoderConfig(image="cnn"),
+        "depth-grid": EncoderConfig(image="depth-grid", oracle_depth_grid=(8, 4), oracle_collision=True),
     }
 
 

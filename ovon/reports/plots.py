@@ -1,4 +1,5 @@
-"""Figures: failure breakdown per split (the paper's figure), SR vs geodesic distance, SR per category.
+"""Figures: failure breakdown per split (the paper's figure), SR vs geodesic distance, SR per category, and
+training curves (SR vs env steps from `metrics.jsonl`).
 
 Drawn on `matplotlib.figure.Figure` objects and saved with `savefig`: no pyplot state, and the global
 backend is never switched (importing this in a notebook leaves its backend as it was)."""
@@ -80,4 +81,50 @@ def plot_sr_per_category(name: str, records: list[dict], out: Path, top: int = 4
         ax.set_ylim(0, 100)
         ax.tick_params(axis="x", labelrotation=70, labelsize=7)
     fig.savefig(out, dpi=110, bbox_inches="tight")
+    return out
+
+
+def learning_curve(rows: list[dict], metric: str = "episode/success", window: int = 10) -> tuple[list, list]:
+    """(env steps, metric) from `metrics.jsonl` rows: each point the episode-weighted mean of `metric` over
+    the last `window` logged updates (an update ends ~10 episodes, so one update's SR is noise)."""
+    steps, values = [], []
+    for i, r in enumerate(rows):
+        part = [x for x in rows[max(0, i - window + 1) : i + 1] if x.get(metric) is not None]
+        weight = [float(x.get("episode/count", 1.0)) if metric.startswith("episode/") else 1.0 for x in part]
+        if sum(weight) > 0:
+            steps.append(r["step"])
+            values.append(sum(w * float(x[metric]) for w, x in zip(weight, part)) / sum(weight))
+    return steps, values
+
+
+def plot_learning_curves(
+    runs: list[str | Path], out: str | Path, metric: str = "episode/success", window: int = 10
+) -> Path:
+    """`metric` vs env steps for training run folders (their `metrics.jsonl`), one line per run."""
+    from ovon.atomic import atomic_write_with
+    from ovon.train.logging import read_metrics
+
+    fig = Figure(figsize=(6.4, 3.6))
+    ax = fig.add_subplot()
+    for run in runs:
+        rows = read_metrics(run)
+        if not rows:
+            raise FileNotFoundError(f"{run}: no metrics.jsonl; fix: pass a run folder written by `ovon train`")
+        # an episode metric may be absent only because no episode has ended yet (an empty line)
+        if not metric.startswith("episode/") and not any(r.get(metric) is not None for r in rows):
+            keys = sorted({k for r in rows for k in r} - {"update", "step", "time"})
+            raise ValueError(f"--metric {metric!r} is not logged in {run}/metrics.jsonl; fix: one of {keys}")
+        steps, values = learning_curve(rows, metric, window)
+        scale = 100.0 if metric in ("episode/success", "episode/spl", "episode/soft_spl") else 1.0  # as %
+        ax.plot(steps, [scale * v for v in values], label=Path(run).name)
+    ax.set_xlabel("environment steps")
+    pct = metric in ("episode/success", "episode/spl", "episode/soft_spl")
+    ax.set_ylabel(f"{metric.split('/')[-1]}{' (%)' if pct else ''}")
+    ax.set_title(f"training episodes, mean of the last {window} updates", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_with(out, lambda f: fig.savefig(f, format="png", dpi=120))
     return out

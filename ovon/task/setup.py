@@ -32,6 +32,7 @@ class EpisodeSetup:
     viewpoints: list[GoalViewpoint]
     goal_ids: frozenset[int]
     tracker: EpisodeTracker  # reset by the env once the first frame is rendered
+    point_goal: np.ndarray | None = None  # pointnav: the goal (forward, left) in the start frame
 
 
 def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig,
@@ -39,7 +40,9 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
     """Goal instances, viewpoints (the episode's own, or navigable points within 1 m of the goals for
     ad-hoc episodes), the goal distance field, and the start (the episode's, or a seeded random one
     connected to the goals). `fov_deg` is the camera's (for the exploration reward). Raises ValueError when
-    the episode cannot be set up in this world."""
+    the episode cannot be set up in this world. With `task.kind == "pointnav"` see `_prepare_point`."""
+    if task.kind == "pointnav":
+        return _prepare_point(world, spec, rng, task)
     objs = goal_instances(world.scene, spec)
     if spec.start_position is not None:
         start_pos = np.asarray(spec.start_position, dtype=np.float64)
@@ -88,3 +91,22 @@ def _random_reachable_start(grid, field: DistanceField, rng: np.random.Generator
         if math.isfinite(d) and d > min_distance:
             return p
     raise ValueError("could not find a navigable start connected to the goal in 1000 tries")
+
+
+def _prepare_point(world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig) -> EpisodeSetup:
+    """A PointNav episode: the spec's start and single viewpoint (the goal point) when it has both, else a
+    pair sampled with `rng` (`ovon.task.pointgoal.sample_point_goal`); the goal field has one source."""
+    from ovon.task.pointgoal import goal_in_start_frame, sample_point_goal
+
+    if spec.start_position is not None and spec.viewpoints:
+        start = np.asarray(spec.start_position, dtype=np.float64)
+        grid = world.nav.grid_for(start)
+        goal = np.asarray(spec.viewpoints[0].position, dtype=np.float64)
+        field = distance_field(grid, goal[None])
+    else:
+        grid, start, goal, field = sample_point_goal(world.nav.floors, rng, task)
+    yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
+    tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=frozenset(), cfg=task, goal_known=True)
+    state = AgentState(np.array(start, dtype=np.float64), float(yaw), 0.0)
+    return EpisodeSetup(state, grid, field, [GoalViewpoint(np.asarray(goal, dtype=np.float64), 0.0)], frozenset(),
+                        tracker, goal_in_start_frame(start, yaw, goal))

@@ -66,6 +66,7 @@ class EpisodeTracker:
     cfg: TaskConfig = field(default_factory=TaskConfig)
     distractors: list[Distractor] = field(default_factory=list)
     coverage: object = None  # ovon.task.coverage.Coverage when the reward has an exploration term
+    goal_known: bool = False  # PointNav: the goal is given, so it counts as seen from the start
 
     def reset(self, position: np.ndarray, semantic: np.ndarray | None = None, yaw: float | None = None) -> None:
         self.position = np.asarray(position, dtype=np.float64).copy()
@@ -80,7 +81,7 @@ class EpisodeTracker:
         self.collisions = 0
         self.last_collided = False
         self.called_stop = False
-        self.goal_seen = False
+        self.goal_seen = self.goal_known
         self.in_region = self.distance < self.cfg.success_distance
         self.entered_region = self.in_region
         self.left_region = False
@@ -159,8 +160,9 @@ class EpisodeTracker:
         if not self.called_stop:
             if self.left_region:
                 return "timeout_left_goal"
-            # Inside the success region at timeout counts as "ignored": it had the goal, never stopped.
-            if self.goal_seen or self.entered_region:
+            # Inside the success region at timeout counts as "ignored": it had the goal, never stopped. A point
+            # goal is always "seen" (given), so there only entering the region counts.
+            if (self.goal_seen and not self.goal_known) or self.entered_region:
                 return "timeout_ignored_goal"
             return "timeout_missed_goal"
         # Only an object in view at the STOP counts (last frame, seen threshold): one glimpsed earlier

@@ -48,11 +48,21 @@ class EpisodeSource:
     split: str = "train"
     limit: int | None = None
     procedural: str | None = None
+    task: str = "objectnav"  # pointnav: point-goal episodes sampled in the `procedural` houses
 
     def load(self) -> list[EpisodeSpec] | None:
         """The episodes (None without `data` or `procedural`: BC from recorded shards)."""
+        if self.task == "pointnav":
+            if not self.procedural or self.data:
+                raise ValueError("--task pointnav samples its episodes in procedural houses: pass --procedural "
+                                 "SEEDS (e.g. 0-23) and no --data")
+            from ovon.config.base import parse_seed_list
+            from ovon.task.pointgoal import pointnav_specs
+
+            return pointnav_specs([f"procedural:{s}" for s in parse_seed_list(self.procedural)])
         if self.procedural:
-            from ovon.train.episodes import adhoc_specs, parse_seed_list
+            from ovon.config.base import parse_seed_list
+            from ovon.train.episodes import adhoc_specs
 
             specs = adhoc_specs(parse_seed_list(self.procedural))
             return specs[: self.limit] if self.limit else specs

@@ -78,7 +78,8 @@ class TrainRun:
 
         cfg = self.cfg
         mine = dist.shard(list(specs), self.info)
-        table = self.text_table(list(specs))
+        # PointNav: the goal input is the env's goal vector (from odometry), so there is no text table.
+        table = {} if task.kind == "pointnav" else self.text_table(list(specs))
         recipe = EnvRecipe(sim=cfg.sim, task=task, encoder=cfg.encoder,
                            text_table={k: torch.as_tensor(v).float().numpy() for k, v in table.items()},
                            expert=cfg.expert if label else None, expert_cfg=expert_config(cfg) if label else None,
@@ -219,7 +220,7 @@ def policy_extra(cfg: TrainConfig, algo: str, update: int, step: int, policy) ->
     from ovon.config.base import to_dict
 
     table = getattr(policy, "text_table", None) or {}
-    return {"algo": algo, "update": update, "step": step, "expert": cfg.expert,
+    return {"algo": algo, "update": update, "step": step, "expert": cfg.expert, "task": to_dict(cfg.task),
             "text_table": {k: torch.as_tensor(v).float() for k, v in table.items()},
             "camera": {k: v for k, v in to_dict(cfg.sim.camera).items() if isinstance(v, int | float | str)}}
 

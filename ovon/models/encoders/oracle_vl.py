@@ -156,11 +156,9 @@ class OracleVLEncoder:
 
     def encode_depth(self, depth: np.ndarray) -> np.ndarray:
         """(H, W) metres -> (2 * rows * cols,) mean and min per cell, scaled to [0, 1]."""
-        gr, gc = self.depth_grid
-        h, w = depth.shape
-        d = np.clip(np.asarray(depth, dtype=np.float32) / self.max_depth, 0.0, 1.0)
-        d = d[: h - h % gr, : w - w % gc].reshape(gr, h // gr, gc, w // gc)
-        return np.concatenate([d.mean(axis=(1, 3)).ravel(), d.min(axis=(1, 3)).ravel()]).astype(np.float32)
+        from ovon.models.encoders.depth_grid import depth_grid_features
+
+        return depth_grid_features(depth, self.depth_grid, self.max_depth)
 
     def encode(self, batch: ObsBatch) -> torch.Tensor:
         sem = get_obs(batch, "semantic")

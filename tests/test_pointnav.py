@@ -1,0 +1,339 @@
+"""PointNav: sampled episodes, the goal vector, the success radius, PPO end to end with exact resume,
+evaluation on held-out houses and the learned navigator inside VLFM."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+torch.set_num_threads(1)
+
+from ovon.config.task import TaskConfig  # noqa: E402
+from ovon.env.core import ObjectNavEnv  # noqa: E402
+from ovon.task.episode import EpisodeSpec, GoalViewpoint  # noqa: E402
+from ovon.task.pointgoal import POINT_GOAL, goal_vector, point_goal_vector, pointnav_specs  # noqa: E402
+from ovon.train.config import train_preset  # noqa: E402
+
+SCENE = "procedural:0"
+
+
+@pytest.fixture(scope="module")
+def tiny_cfg():
+    return train_preset("tiny", "pointnav")
+
+
+def _env(cfg, task: TaskConfig | None = None) -> ObjectNavEnv:
+    return ObjectNavEnv(episodes=pointnav_specs([SCENE]), sim=cfg.sim, task=task or cfg.task)
+
+
+# ----- episodes and observations ---------------------------------------------------------------------
+def test_episodes_sample_within_the_distance_range(tiny_cfg) -> None:
+    task = dataclasses.replace(tiny_cfg.task, point_min_distance_m=2.0, point_max_distance_m=3.0)
+    env = _env(tiny_cfg, task)
+    d0s = []
+    for seed in range(12):
+        obs, _ = env.reset(seed=seed, options={"episode": pointnav_specs([SCENE])[0]})
+        d0 = env.tracker.d0
+        assert 2.0 <= d0 <= 3.0
+        # rho (straight line) is never longer than the geodesic distance
+        assert obs["pointgoal"][0] <= d0 + 0.05  # the grid's geodesic is a few mm off the straight line
+        assert "pointgoal" in env.observation_space.spaces and obs["goal"] == POINT_GOAL
+        d0s.append(d0)
+    assert len(set(np.round(d0s, 4))) > 6  # different pairs per seed
+    env.reset(seed=3, options={"episode": pointnav_specs([SCENE])[0]})
+    again = env.tracker.d0
+    env.reset(seed=3, options={"episode": pointnav_specs([SCENE])[0]})
+    assert env.tracker.d0 == again  # the seed fixes the pair
+    env.close()
+
+
+def test_an_impossible_range_is_refused(tiny_cfg) -> None:
+    task = dataclasses.replace(tiny_cfg.task, point_min_distance_m=500.0, point_max_distance_m=600.0)
+    env = _env(tiny_cfg, task)
+    with pytest.raises(ValueError, match="point_min_distance_m"):
+        env.reset(seed=0, options={"episode": pointnav_specs([SCENE])[0]})
+    env.close()
+    from ovon.config.base import ConfigError, validate
+
+    with pytest.raises(ConfigError, match="point_min_distance_m"):
+        validate(dataclasses.replace(tiny_cfg.task, point_min_distance_m=4.0, point_max_distance_m=2.0))
+
+
+def test_goal_vector_by_hand() -> None:
+    # turned 90 deg left after 1 m forward: a goal 1 m forward and 2 m left of the start is 2 m straight ahead
+    np.testing.assert_allclose(
+        point_goal_vector(np.array([1.0, 0.0, math.pi / 2]), np.array([1.0, 2.0])), [2.0, 1.0, 0.0], atol=1e-6
+    )
+    # at the start: a goal 1 m to the left is at theta = +90 deg
+    np.testing.assert_allclose(point_goal_vector(np.zeros(3), np.array([0.0, 1.0])), [1.0, 0.0, 1.0], atol=1e-6)
+    # behind and to the right
+    v = point_goal_vector(np.array([0.0, 0.0, 0.0]), np.array([-3.0, -3.0]))
+    np.testing.assert_allclose(v, [math.sqrt(18), math.cos(-3 * math.pi / 4), math.sin(-3 * math.pi / 4)], atol=1e-6)
+
+
+def test_goal_vector_agrees_with_the_navigators_request() -> None:
+    """The env's goal vector (odometry) and the one the learned navigator builds from `NavRequest.rho/.theta`
+    (the episodic frame of the modular agents) are the same numbers."""
+    from ovon.agents.modular.navigation import NavRequest
+    from ovon.agents.modular.sensors import pose_from_odometry
+
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        odo = np.array([rng.uniform(-3, 3), rng.uniform(-3, 3), rng.uniform(-math.pi, math.pi)])
+        goal_fl = rng.uniform(-4, 4, size=2)
+        req = NavRequest(pose_from_odometry(odo), (-goal_fl[1], -goal_fl[0]), "goal", None)
+        np.testing.assert_allclose(goal_vector(req.rho, req.theta), point_goal_vector(odo, goal_fl), atol=1e-5)
+
+
+def test_goal_vector_follows_the_true_pose_without_noise(tiny_cfg) -> None:
+    """rho shrinks as the agent drives at the goal: after each step the observed vector is the true goal
+    position relative to the true pose (no odometry noise)."""
+    from ovon.geometry import heading_vector
+
+    env = _env(tiny_cfg)
+    obs, _ = env.reset(seed=5, options={"episode": pointnav_specs([SCENE])[0]})
+    goal = env.privileged().viewpoints[0].position
+    for a in (1, 2, 1, 3, 1):
+        obs, *_ = env.step(a)
+        s = env.privileged().state
+        d = goal - s.position
+        f = heading_vector(s.yaw)
+        fwd, left = float(d @ f), float(d @ np.array([f[2], 0.0, -f[0]]))
+        np.testing.assert_allclose(
+            obs["pointgoal"], goal_vector(math.hypot(fwd, left), math.atan2(left, fwd)), atol=1e-4
+        )
+    env.close()
+
+
+@pytest.mark.parametrize(("radius", "success"), [(0.36, True), (0.25, False)])
+def test_success_radius(tiny_cfg, radius: float, success: bool) -> None:
+    """STOP 0.3 m (geodesic) from the goal succeeds with a 0.36 m radius and fails with 0.25 m."""
+    from ovon.sim.world import acquire_world
+    from ovon.task.pointgoal import sample_point_goal
+
+    task = dataclasses.replace(tiny_cfg.task, success_distance=radius)
+    world = acquire_world(SCENE, tiny_cfg.sim)
+    grid, _, goal, field = sample_point_goal(world.nav.floors, np.random.default_rng(0), task)
+    rows, cols = np.nonzero(grid.navigable & (np.abs(field.dist - 0.3) < 0.02))
+    start = grid.cell_to_world(int(rows[0]), int(cols[0]))
+    spec = EpisodeSpec(
+        "fixed", SCENE, POINT_GOAL, start_position=start, start_yaw=0.0, viewpoints=[GoalViewpoint(goal, 0.0)]
+    )
+    env = _env(tiny_cfg, task)
+    env.reset(seed=0, options={"episode": spec})
+    assert abs(env.tracker.d0 - 0.3) < 0.05
+    _, reward, terminated, _, info = env.step(0)
+    assert terminated and info["metrics"]["success"] is success
+    assert info["metrics"]["failure"] == (None if success else "stop_too_far")
+    r = task.reward
+    assert reward == pytest.approx(r.dense_success if success else r.dense_failed_stop + r.dense_slack)
+    env.close()
+
+
+# ----- training ----------------------------------------------------------------------------------------
+def test_pointnav_config_is_checked() -> None:
+    from ovon.config.base import ConfigError, validate
+
+    cfg = train_preset("tiny", "pointnav")
+    with pytest.raises(ConfigError, match="task.kind"):
+        validate(dataclasses.replace(cfg, algo="dagger"))
+    with pytest.raises(ConfigError, match="depth-grid"):
+        validate(dataclasses.replace(cfg, encoder=dataclasses.replace(cfg.encoder, image="oracle-vl")))
+    with pytest.raises(KeyError, match="unknown task"):
+        train_preset("tiny", "imagenav")
+
+
+def test_tiny_training_runs_and_resumes_exactly(tmp_path: Path) -> None:
+    from ovon.models.policy import ActorCritic
+    from ovon.train import train
+    from ovon.train.logging import read_metrics
+
+    specs = pointnav_specs([SCENE, "procedural:1"])
+    cfg = train_preset("tiny", "pointnav", num_envs=2, rollout_steps=8, max_updates=4, checkpoint_every=1)
+    train(cfg, specs, tmp_path / "straight")
+    train(dataclasses.replace(cfg, max_updates=2), specs, tmp_path / "split")
+    train(cfg, specs, tmp_path / "split", resume=True)
+    a, b = read_metrics(tmp_path / "straight"), read_metrics(tmp_path / "split")
+    assert len(a) == 4 and [r["loss"] for r in a] == [r["loss"] for r in b]
+    assert sum(r["episode/count"] for r in a) > 0
+    pa, pb = ActorCritic.load(tmp_path / "straight" / "policy.pt"), ActorCritic.load(tmp_path / "split" / "policy.pt")
+    assert pa.text_dim == 3 and pa.encoder_cfg.image == "depth-grid"
+    assert pa.checkpoint_extra["task"]["kind"] == "pointnav" and not pa.checkpoint_extra["text_table"]
+    for (_, x), (_, y) in zip(pa.state_dict().items(), pb.state_dict().items()):
+        assert torch.equal(x, y)
+
+
+@pytest.fixture(scope="module")
+def tiny_policy(tmp_path_factory) -> Path:
+    """A tiny PointNav policy trained through the CLI (two updates)."""
+    from ovon.cli.main import main
+
+    out = tmp_path_factory.mktemp("pointnav") / "run"
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "ppo",
+                "--task",
+                "pointnav",
+                "--preset",
+                "tiny",
+                "--procedural",
+                "0-1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    return out / "policy.pt"
+
+
+def test_cli_refuses_pointnav_without_houses_or_with_an_expert(tmp_path: Path, capsys) -> None:
+    from ovon.cli.main import main
+
+    assert main(["train", "--algo", "ppo", "--task", "pointnav", "--preset", "tiny", "--out", str(tmp_path / "a")]) == 2
+    assert "--procedural" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "train",
+                "--algo",
+                "dagger",
+                "--task",
+                "pointnav",
+                "--preset",
+                "tiny",
+                "--procedural",
+                "0",
+                "--out",
+                str(tmp_path / "b"),
+            ]
+        )
+        == 2
+    )
+    assert "ppo" in capsys.readouterr().err
+
+
+def test_evaluate_pointnav_on_held_out_houses(tmp_path: Path, tiny_policy: Path, capsys) -> None:
+    import json
+
+    from ovon.cli.main import main
+
+    args = [
+        "evaluate",
+        "--task",
+        "pointnav",
+        "--procedural",
+        "80000",
+        "--episodes",
+        "2",
+        "--agent",
+        "policy",
+        "--checkpoint",
+        str(tiny_policy),
+        "--workers",
+        "1",
+        "--no-progress",
+    ]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    recs = [json.loads(x) for x in (tmp_path / "a" / "episodes.jsonl").read_text().splitlines()]
+    assert len(recs) == 2 and {r["scene"] for r in recs} == {"procedural:80000"} and recs[0]["split"] == "val"
+    task = json.loads((tmp_path / "a" / "run.json").read_text())["task"]
+    assert (
+        task["kind"] == "pointnav"
+        and task["success_distance"] == train_preset("tiny", "pointnav").task.success_distance
+    )
+    # the same episodes for another agent: same start distances
+    assert main([*args[:7], "--agent", "random", "--workers", "1", "--no-progress", "--out", str(tmp_path / "b")]) == 0
+    recs_b = [json.loads(x) for x in (tmp_path / "b" / "episodes.jsonl").read_text().splitlines()]
+    assert [r["start_distance"] for r in recs] == [r["start_distance"] for r in recs_b]
+    capsys.readouterr()
+    assert main([*args, "--data", str(tmp_path), "--out", str(tmp_path / "c")]) == 2
+    assert "--procedural" in capsys.readouterr().err
+
+
+# ----- the learned navigator -----------------------------------------------------------------------------
+def test_learned_navigator_acts_inside_vlfm(tiny_policy: Path) -> None:
+    """`navigator=learned` + `navigator.checkpoint` (as `--agent-arg` passes them) drive VLFM's exploration
+    and bee-lining with the PointNav policy; the camera it was trained with is checked."""
+    from ovon.agents.modular.learned_navigator import LearnedNavigator
+    from ovon.agents.modular.vlfm import VLFMAgent
+    from ovon.config.sim import CameraConfig, SimConfig
+    from ovon.evaluate.runner import run_episode
+    from ovon.train.episodes import adhoc_specs
+
+    agent = VLFMAgent(navigator="learned", **{"navigator.checkpoint": str(tiny_policy), "detector": "perfect"})
+    assert "learned navigator" in agent.name
+    sim = SimConfig(camera=CameraConfig(width=36, height=64))  # the tiny preset's camera (HFOV and aspect)
+    env = ObjectNavEnv(episodes=adhoc_specs([0], categories=["bed"]), sim=sim, task=TaskConfig(max_steps=40))
+    from ovon.env.privileged import PrivilegedInfo
+
+    env = PrivilegedInfo(env)
+    spec = adhoc_specs([0], categories=["bed"])[0]
+    rec = run_episode(env, agent, spec, 0)
+    assert isinstance(agent.core.navigator, LearnedNavigator)
+    assert rec["steps"] > agent.cfg.spin_steps and all(0 <= a <= 3 for a in rec["actions"])
+    # a camera of another aspect ratio is refused in one line
+    wide = PrivilegedInfo(
+        ObjectNavEnv(
+            episodes=[spec], sim=SimConfig(camera=CameraConfig(width=64, height=36)), task=TaskConfig(max_steps=5)
+        )
+    )
+    with pytest.raises(ValueError, match="camera"):
+        run_episode(wide, VLFMAgent(navigator="learned", **{"navigator.checkpoint": str(tiny_policy)}), spec, 0)
+    env.close()
+    wide.close()
+
+
+def test_learned_navigator_refuses_bad_checkpoints(tmp_path: Path) -> None:
+    from ovon.agents.modular.vlfm import VLFMAgent
+    from ovon.config.base import ConfigError
+
+    with pytest.raises((ConfigError, ValueError), match="navigator.checkpoint"):
+        VLFMAgent(navigator="learned")
+    with pytest.raises((ConfigError, ValueError), match="navigator.checkpoint"):
+        VLFMAgent(navigator="learned", **{"navigator.checkpoint": str(tmp_path / "missing.pt")})
+
+
+def test_learned_navigator_stops_at_the_callers_radius(tiny_policy: Path) -> None:
+    from ovon.agents.modular.config import NavigatorConfig
+    from ovon.agents.modular.learned_navigator import LearnedNavigator
+    from ovon.agents.modular.navigation import NavRequest
+    from ovon.agents.modular.sensors import Pose2D, Sensors
+    from ovon.config.sim import AgentConfig, CameraConfig
+
+    nav = LearnedNavigator(
+        NavigatorConfig(kind="learned", checkpoint=str(tiny_policy)),
+        None,
+        Sensors(CameraConfig(width=36, height=64), AgentConfig()),
+    )
+    obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
+    assert nav.act(obs, NavRequest(Pose2D(0, 0, 0), (0.0, -0.5), "goal", None)) == 0  # within 0.9 m
+    far = NavRequest(Pose2D(0, 0, 0), (0.0, -3.0), "goal", None)
+    acts = [nav.act(obs, far) for _ in range(8)]
+    assert set(acts) <= {1, 2, 3}  # never STOPs on its own further away (the caller's radius decides)
+    nav.reset()
+    assert [nav.act(obs, far) for _ in range(8)] == acts  # sampled, but seeded per episode
+
+
+def test_curve_png_from_metrics(tmp_path: Path, tiny_policy: Path, capsys) -> None:
+    from ovon.cli.main import main
+    from ovon.reports.plots import learning_curve
+
+    run = tiny_policy.parent
+    assert main(["curve", str(run), "--out", str(tmp_path / "c.png")]) == 0
+    assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+    assert main(["curve", str(run), "--metric", "nope", "--out", str(tmp_path / "d.png")]) == 2
+    assert "nope" in capsys.readouterr().err
+    rows = [
+        {"step": 10, "episode/success": 1.0, "episode/count": 1.0},
+        {"step": 20, "episode/success": 0.0, "episode/count": 3.0},
+    ]
+    assert learning_curve(rows, window=2) == ([10, 20], [1.0, 0.25])  # episode-weighted
