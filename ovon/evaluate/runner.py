@@ -15,24 +15,27 @@ def episode_seed(seed: int, split: str, episode_id: str, scene: str) -> int:
     return zlib.crc32(f"{seed}|{split}|{scene}|{episode_id}".encode())
 
 
+def episode_info(spec: EpisodeSpec, ep_seed: int, sim) -> dict:
+    """What an agent's `reset` gets (also when `ovon video` replays an episode through the agent)."""
+    return {
+        "episode_id": spec.episode_id,
+        "scene_id": spec.scene,
+        "split": spec.split,
+        "goal": spec.goal_category,
+        "seed": ep_seed,
+        # the robot's calibration (not privileged): camera intrinsics and body, for agents that map
+        "camera": dataclasses.asdict(sim.camera),
+        "embodiment": dataclasses.asdict(sim.agent),
+    }
+
+
 def run_episode(env, agent, spec: EpisodeSpec, seed: int, record_path: bool = False) -> dict:
     """`env` is an `ovon.env` stack, with `PrivilegedInfo` when the agent is privileged: such an agent
     gets `observation["privileged"]`; any other agent sees only the robot's observations."""
     ep_seed = episode_seed(seed, spec.split, spec.episode_id, spec.scene)
     obs, info = env.reset(seed=ep_seed, options={"episode": spec})
     truth = env.unwrapped  # the harness's own bookkeeping (paths for videos) may read ground truth
-    agent.reset(
-        {
-            "episode_id": spec.episode_id,
-            "scene_id": spec.scene,
-            "split": spec.split,
-            "goal": spec.goal_category,
-            "seed": ep_seed,
-            # the robot's calibration (not privileged): camera intrinsics and body, for agents that map
-            "camera": dataclasses.asdict(truth.sim_cfg.camera),
-            "embodiment": dataclasses.asdict(truth.sim_cfg.agent),
-        }
-    )
+    agent.reset(episode_info(spec, ep_seed, truth.sim_cfg))
     privileged = is_privileged(agent)
 
     def pose() -> list[float]:
@@ -69,6 +72,8 @@ def run_episode(env, agent, spec: EpisodeSpec, seed: int, record_path: bool = Fa
         "collisions": m["collisions"],
         "goal_seen": m["goal_seen"],
         "failure": m["failure"],
+        "distance_to_object": m["distance_to_object"],
+        "goal_in_view": m["goal_in_view"],
     }
     record["actions"] = actions  # with the episode seed, enough to replay the episode exactly (videos)
     if record_path:
