@@ -103,15 +103,20 @@ def test_success(env):
     m = info["metrics"]
     assert m["success"] and m["failure"] is None
     assert m["goal_seen"] and m["spl"] > 0.9 and m["steps"] == 7
+    # ends at z = 2.0, facing the couch: 1.1 m from its footprint (z 0.2-0.9), the couch in the last frame
+    assert m["distance_to_object"] == pytest.approx(1.1, abs=0.02) and m["goal_in_view"]
 
 
 def test_stop_wrong_object(env):
-    # straight at the toaster (the couch is ~70 deg off-axis, out of the 60 deg view), 0.7 m from it, look
-    # down at it and STOP: the toaster is in the STOP frame
+    # straight at the toaster (the couch is ~70 deg off-axis, out of the 60 deg view), 0.7 m from it; the
+    # toaster (0.6 m high) is below the level camera's view there, so look down before the STOP: only an
+    # object in view at the STOP makes it a wrong-object STOP
     info = run(env, (5.15, 0.0, 3.5), 0.0, [F] * 8 + [LOOK_DOWN, S])
     m = info["metrics"]
     assert not m["success"] and not m["goal_seen"]
     assert m["failure"] == "stop_wrong_object"
+    # the STOP pose (5.15, 1.5) to the couch footprint's corner (1.5, 0.9); the couch is not in view
+    assert m["distance_to_object"] == pytest.approx(math.hypot(3.65, 0.6), abs=0.02) and not m["goal_in_view"]
 
 
 def test_stop_next_to_an_object_out_of_view_is_not_wrong_object(env):
@@ -132,6 +137,7 @@ def test_stop_too_far(env):
     info = run(env, (0.9, 0.0, 3.5), 0.0, [S])
     m = info["metrics"]
     assert m["goal_seen"] and m["failure"] == "stop_too_far"
+    assert m["distance_to_object"] == pytest.approx(2.6) and m["goal_in_view"]
 
 
 def test_timeout_missed_goal(env):

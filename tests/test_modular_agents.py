@@ -21,7 +21,7 @@ from ovon.agents.modular.value_map import ValueMap
 from ovon.config.base import ConfigError
 from ovon.env import make_objectnav
 from ovon.evaluate.runner import run_episode
-from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT
+from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.task.episode import EpisodeSpec
 from tests.modular_scene import START, portrait_sim, two_room_scene
 
@@ -180,6 +180,96 @@ def test_geometric_navigator_replans_around_new_obstacles_and_stops_near_the_goa
     assert nav.act({}, NavRequest(Pose2D(3.0, 3.0, 0.0), far, "frontier", maps)) is None
 
 
+def _step(pose: Pose2D, action: int, step: float = 0.25, turn: float = math.radians(30.0)) -> Pose2D:
+    """The simulator's kinematics without obstacles (yaw 0 looks along -z, positive yaw turns left)."""
+    if action == MOVE_FORWARD:
+        return Pose2D(pose.x - math.sin(pose.yaw) * step, pose.z - math.cos(pose.yaw) * step, pose.yaw)
+    if action == TURN_LEFT:
+        return Pose2D(pose.x, pose.z, pose.yaw + turn)
+    if action == TURN_RIGHT:
+        return Pose2D(pose.x, pose.z, pose.yaw - turn)
+    return pose
+
+
+def _navigator(**cfg) -> tuple[GeometricNavigator, AgentMaps]:
+    sim = portrait_sim()
+    maps = AgentMaps(MapConfig(size_m=12.0), Sensors(sim.camera, sim.agent))
+    maps.reset()
+    nav = GeometricNavigator(NavigatorConfig(**cfg), maps, maps.sensors)
+    nav.reset()
+    return nav, maps
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 90.0, 150.0, -120.0])
+def test_final_approach_heads_for_the_goal_point_and_stops_inside_the_radius(yaw_deg):
+    """0.95 m from the goal point (just outside the 0.9 m stop radius) and facing anywhere: the smallest turn
+    toward a heading whose one step lands inside the radius, one MOVE_FORWARD, STOP; never the ring-cell
+    circling that overshoots."""
+    nav, maps = _navigator()
+    goal = (0.0, -0.95)
+    pose = Pose2D(0.0, 0.0, math.radians(yaw_deg))
+    actions = []
+    for _ in range(10):
+        a = nav.act({}, NavRequest(pose, goal, "goal", maps))
+        actions.append(a)
+        if a == STOP:
+            break
+        pose = _step(pose, a)
+    assert actions[-1] == STOP and actions.count(MOVE_FORWARD) == 1, actions
+    assert len(actions) <= 1 + 1 + 3  # at most 3 turns (90 deg either way suffices at this distance), 1 step
+    assert math.hypot(pose.x - goal[0], pose.z - goal[1]) < 0.9
+
+
+def test_navigator_settles_when_no_step_gets_inside_the_stop_radius():
+    """The goal point inside an obstacle whose inflated edge lies just outside the stop radius: no step lands
+    inside it, so after `settle_steps` steps without getting closer the agent STOPs where it is."""
+    nav, maps = _navigator(settle_steps=5)
+    goal = (0.0, -1.0)
+    ring = [(goal[0] + r * math.cos(a), goal[1] + r * math.sin(a))
+            for r in np.arange(0.0, 0.78, 0.02) for a in np.linspace(0, 2 * math.pi, 120)]
+    maps.add_obstacle_points(np.array(ring))
+    pose = Pose2D(0.0, 0.0, 0.0)
+    assert nav.final_approach(pose, goal) is None
+    seen = [nav.act({}, NavRequest(pose, goal, "goal", maps)) for _ in range(6)]
+    assert STOP not in seen[:5] and seen[5] == STOP, seen
+    nav.reset()
+    assert nav.act({}, NavRequest(pose, goal, "goal", maps)) != STOP  # the count starts again per episode
+
+
+def test_lifting_skips_depth_clamped_at_the_sensor_minimum():
+    """A pixel at the camera's minimum depth is clamped (the surface is nearer): it lifts to no point."""
+    from ovon.agents.modular.config import LiftConfig
+    from ovon.agents.modular.lifting import GoalMemory
+    from ovon.agents.modular.sensors import DepthProjector
+    from ovon.models.detectors.base import Detection
+
+    cam = portrait_sim().camera
+    depth = np.full((cam.height, cam.width), 2.0, np.float32)
+    mask = np.zeros(depth.shape, bool)
+    mask[20:40, 10:30] = True
+    depth[20:30, 10:30] = cam.min_depth  # the upper half of the object is too close to measure
+    memory = GoalMemory(LiftConfig(mask_erode_px=0), DepthProjector(cam))
+    det = Detection(box=(10, 20, 30, 40), score=1.0, label="couch", mask=mask)
+    assert memory.add([det], depth, Pose2D(0.0, 0.0, 0.0)) == 200  # the 10 x 20 measured pixels only
+    assert np.allclose(-memory.points[:, 2], 2.0, atol=1e-4)  # at z-depth 2 m ahead (yaw 0 looks along -z)
+
+
+def test_debug_frame_draws_the_agents_beliefs(env):
+    """After an episode: two panels (maps, value map) of the requested height, with the lifted goal points
+    (red) and the agent (orange) on them; None before the first reset."""
+    from ovon.agents.modular.debug import AGENT, GOAL
+
+    agent = VLFMAgent()
+    assert agent.debug_frame(120) is None
+    run_episode(env, agent, couch_episode(), seed=0)
+    img = agent.debug_frame(120)
+    assert img.dtype == np.uint8 and img.shape == (120, 242, 3)
+    left = img[:, :120]
+    for colour in (GOAL, AGENT):
+        assert (left == np.array(colour, np.uint8)).all(axis=2).sum() >= 4, colour
+    assert len(np.unique(img[16:, 122:].reshape(-1, 3), axis=0)) > 8  # the value map has a colour scale
+
+
 def test_config_presets_overrides_and_errors():
     cfg = modular_config(VLFMConfig, "paper")
     assert (cfg.maps.obstacle_min_height_m, cfg.maps.obstacle_max_height_m) == (0.6, 0.9)
@@ -196,9 +286,21 @@ def test_config_presets_overrides_and_errors():
     with pytest.raises(ValueError, match="--checkpoint"):
         DAgRLODAgent()
     assert VLFMAgent.describe(detector="noisy") == "VLFM, oracle detection (miss 0.3, fp 0.3), oracle-vl value"
+    # the command line passes dotted keys through (--agent-arg navigator.stop_distance_m=0.6)
+    from ovon.agents import AgentError, check_agent
+    from ovon.cli.evaluate import _agent_kwargs
+
+    kwargs = _agent_kwargs(["navigator.stop_distance_m=0.6", "preset=cpu"], None)
+    assert kwargs == {"navigator.stop_distance_m": 0.6, "preset": "cpu"}
+    check_agent("vlfm", kwargs)
+    assert VLFMAgent(**kwargs).cfg.navigator.stop_distance_m == 0.6
+    with pytest.raises(AgentError, match="stop_distance_m"):
+        check_agent("vlfm", _agent_kwargs(["navigator.stop_distanc=0.6"], None))
 
 
 def test_cli_evaluate_vlfm_and_report_row_names(tiny_dataset, tiny_scenes, tmp_path, capsys):
+    import json
+
     from ovon.cli.main import main as ovon
 
     run = tmp_path / "vlfm"
@@ -217,6 +319,30 @@ def test_cli_evaluate_vlfm_and_report_row_names(tiny_dataset, tiny_scenes, tmp_p
     assert "| VLFM, oracle detection, oracle-vl value | – |" in md
     for name in ("sr_vs_distance.png", "failures_vlfm_vlfm.png", "failures_vlfm_vlfm_noisy.png"):
         assert Path(tmp_path / "rep" / name).stat().st_size > 0
+    # the video has a fourth panel with what the agent believes; --no-agent-view leaves it out
+    import imageio.v2 as imageio
+
+    from ovon.evaluate.results import read_records
+
+    ep = read_records(run)[0]
+    where = ["--run", str(run), "--episode", ep["episode_id"], "--split", ep["split"], "--scene",
+             Path(ep["scene"]).parent.name]
+    assert ovon(["video", *where, "--out", str(tmp_path / "beliefs.mp4")]) == 0
+    assert ovon(["video", *where, "--no-agent-view", "--out", str(tmp_path / "truth.mp4")]) == 0
+    with_view = imageio.get_reader(tmp_path / "beliefs.mp4").get_data(0)
+    without = imageio.get_reader(tmp_path / "truth.mp4").get_data(0)
+    assert with_view.shape[0] == without.shape[0] and with_view.shape[1] >= without.shape[1] + 2 * 240
+    assert "chose another action" not in capsys.readouterr().err  # the fresh agent replays the record
+    # a record the agent would not have made (its 4th turn reversed): the panel stops there, with a warning
+    lines = (run / "episodes.jsonl").read_text().splitlines()
+    first = json.loads(lines[0])
+    assert first["actions"][3] == TURN_LEFT
+    first["actions"][3] = TURN_RIGHT
+    (run / "episodes.jsonl").write_text("\n".join([json.dumps(first, sort_keys=True), *lines[1:]]) + "\n")
+    where = ["--run", str(run), "--episode", first["episode_id"], "--split", first["split"], "--scene",
+             Path(first["scene"]).parent.name]
+    assert ovon(["video", *where, "--out", str(tmp_path / "edited.mp4")]) == 0
+    assert "chose another action than the record after step 3" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -64,6 +64,8 @@ EVAL_CASES = [  # (extra arguments, words the one line must contain)
     (["--noise", "wind"], ["--noise", "wind"]),
     (["--agent-arg", "bogus=1"], ["'bogus'", "stop_probability"]),
     (["--agent-arg", "novalue"], ["--agent-arg", "KEY=VALUE"]),
+    (["--agent-arg", "a..b=1"], ["--agent-arg", "KEY=VALUE"]),
+    (["--agent-arg", "bogus.key=1"], ["'bogus.key'", "stop_probability"]),
     (["--agent-arg", f"seed={DEEP}"], ["agent 'random'"]),
     (["--agent-arg", "stop_probability=abc"], ["stop_probability='abc'"]),
     (["--agent", "json:JSONDecoder"], ["json:JSONDecoder", "reset"]),

@@ -191,3 +191,19 @@ def test_dense_and_sparse_rewards():
     assert s.reward() == pytest.approx(-0.001)
     s.update(np.array([1.0, 0, 0]), stop=False, collided=True)
     assert s.reward() == pytest.approx(-0.001 - 0.003)
+
+
+def test_where_the_episode_ended():
+    """`goal_in_view` is the last frame only; `distance_to_object` comes from the tracker's box distance."""
+    t = make(goal_x=3.0)
+    t.reset(np.zeros(3))
+    walk(t, [1.0, 2.0], stop_at_end=True, frames=[frame({GOAL: 0.05}), frame()])
+    m = t.metrics()
+    assert m.goal_seen and not m.goal_in_view and m.distance_to_object is None
+    t = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL}), TaskConfig(),
+                       object_distance_fn=lambda p: abs(4.0 - float(p[0])))
+    t.reset(np.zeros(3))
+    walk(t, [1.0, 2.0], stop_at_end=True, frames=[frame(), frame({GOAL: 0.05})])
+    m = t.metrics()
+    assert m.goal_in_view and m.distance_to_object == pytest.approx(2.0)
+    assert m.failure == "stop_too_far"

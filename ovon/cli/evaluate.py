@@ -69,6 +69,8 @@ def register(sub) -> None:
     v.add_argument("--seed")
     v.add_argument("--scene", help="part of the scene path (episode ids are unique per scene only)")
     v.add_argument("--fps", default=8)
+    v.add_argument("--no-agent-view", action="store_true",
+                   help="leave out the panel of what the agent believes (agents with debug_frame, e.g. vlfm)")
     v.add_argument("--out", required=True)
     v.set_defaults(func=cmd_video)
 
@@ -79,9 +81,10 @@ def _agent_kwargs(items: list[str], checkpoint: str | None) -> dict:
     kwargs = {}
     for item in items:
         k, sep, v = item.partition("=")
-        if not sep or not k.strip().isidentifier():
-            raise ConfigError(f"--agent-arg {item!r} is not KEY=VALUE with KEY a Python name; fix: e.g. "
-                              "--agent-arg temperature=0.5")
+        if not sep or not all(part.isidentifier() for part in k.strip().split(".")):
+            raise ConfigError(f"--agent-arg {item!r} is not KEY=VALUE with KEY a Python name (or dotted names, "
+                              "for agents that take nested settings); fix: e.g. --agent-arg temperature=0.5 or "
+                              "--agent-arg navigator.stop_distance_m=0.6")
         try:
             kwargs[k.strip()] = yaml.safe_load(v) if v != "" else ""
         except (yaml.YAMLError, RecursionError, ValueError):
@@ -238,6 +241,7 @@ def cmd_video(args) -> int:
     from ovon.reports.video import render_video
 
     a = from_args(VideoArgs, args)
-    path = render_video(a.run, a.episode, args.out, split=args.split, seed=a.seed, fps=a.fps, scene=args.scene)
+    path = render_video(a.run, a.episode, args.out, split=args.split, seed=a.seed, fps=a.fps, scene=args.scene,
+                        agent_view=not args.no_agent_view)
     print(f"video: {path}")
     return 0

@@ -16,7 +16,7 @@ import numpy as np
 
 from ovon.config.dataset import ViewpointConfig
 from ovon.geometry import yaw_to_quat, yaw_towards
-from ovon.scenes.model import ObjectInstance
+from ovon.scenes.model import ObjectInstance, footprint_distance
 
 
 @dataclass
@@ -28,21 +28,6 @@ class ScoredViewpoint:
 
     def rotation(self) -> list[float]:
         return yaw_to_quat(self.yaw)
-
-
-def footprint_distance(obj: ObjectInstance, xz: np.ndarray) -> np.ndarray:
-    """Floor-plane distance from points (N, 2) to the object's oriented box footprint (0 inside)."""
-    R = np.asarray(obj.obb_rotation, dtype=np.float64)
-    c = np.asarray(obj.obb_center, dtype=np.float64)
-    he = np.asarray(obj.obb_half_extents, dtype=np.float64)
-    d3 = np.zeros((len(xz), 3))
-    d3[:, 0] = xz[:, 0] - c[0]
-    d3[:, 2] = xz[:, 1] - c[2]
-    local = d3 @ R  # world -> box frame (columns of R are the box axes)
-    # Yaw-only boxes: local x/z span the floor plane. For tilted boxes this is still a bound.
-    ex = np.maximum(np.abs(local[:, 0]) - he[0], 0.0)
-    ez = np.maximum(np.abs(local[:, 2]) - he[2], 0.0)
-    return np.hypot(ex, ez)
 
 
 def candidate_points(obj: ObjectInstance, grid, cfg: ViewpointConfig) -> np.ndarray:

@@ -16,6 +16,20 @@ def episode_seed(seed: int, split: str, episode_id: str, scene: str) -> int:
     return zlib.crc32(f"{seed}|{split}|{scene}|{episode_id}".encode())
 
 
+def episode_info(spec: EpisodeSpec, ep_seed: int, sim) -> dict:
+    """What an agent's `reset` gets (also when `ovon video` replays an episode through the agent)."""
+    return {
+        "episode_id": spec.episode_id,
+        "scene_id": spec.scene,
+        "split": spec.split,
+        "goal": spec.goal_category,
+        "seed": ep_seed,
+        # the robot's calibration (not privileged): camera intrinsics and body, for agents that map
+        "camera": dataclasses.asdict(sim.camera),
+        "embodiment": dataclasses.asdict(sim.agent),
+    }
+
+
 class EpisodeRun:
     """One episode stepped from outside: `info` for the agent's reset, then `observation` / `step(action)`
     until `done`, then `record()`. With `privileged`, the observation carries `observation["privileged"]`
@@ -26,16 +40,7 @@ class EpisodeRun:
         ep_seed = episode_seed(seed, spec.split, spec.episode_id, spec.scene)
         self._obs, self._info = env.reset(seed=ep_seed, options={"episode": spec})
         self.truth = env.unwrapped  # the harness's own bookkeeping (paths for videos) may read ground truth
-        self.info = {
-            "episode_id": spec.episode_id,
-            "scene_id": spec.scene,
-            "split": spec.split,
-            "goal": spec.goal_category,
-            "seed": ep_seed,
-            # the robot's calibration (not privileged): camera intrinsics and body, for agents that map
-            "camera": dataclasses.asdict(self.truth.sim_cfg.camera),
-            "embodiment": dataclasses.asdict(self.truth.sim_cfg.agent),
-        }
+        self.info = episode_info(spec, ep_seed, self.truth.sim_cfg)
         self.record_path = record_path
         self.path = [self._pose()] if record_path else []
         self.actions: list[int] = []
@@ -79,6 +84,8 @@ class EpisodeRun:
             "collisions": m["collisions"],
             "goal_seen": m["goal_seen"],
             "failure": m["failure"],
+            "distance_to_object": m["distance_to_object"],
+            "goal_in_view": m["goal_in_view"],
         }
         record["actions"] = self.actions  # with the episode seed, enough to replay the episode exactly (videos)
         if self.record_path:

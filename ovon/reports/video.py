@@ -1,9 +1,17 @@
 """`ovon video`: replay a recorded episode (same seed + recorded actions = same trajectory) and write an
-mp4 with RGB, depth and a top-down map (navigable area, path, goal viewpoints and goal objects)."""
+mp4 with RGB, depth and a top-down map (navigable area, path, goal viewpoints and goal objects).
+
+Agents with a `debug_frame(size)` method (`ovon.agents.base.DebugView`, e.g. the modular agents) get a
+fourth panel: a fresh agent built from the run's settings is fed the replayed observations and its
+`debug_frame` is drawn after each decision (its maps, frontiers, value map, goal points, plan), beside the
+truth. Its actions are checked against the record; where they differ (an agent that is not deterministic
+given the episode seed) the panel stops and says so, and the video follows the record.
+"""
 
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import cv2
@@ -61,8 +69,57 @@ def _fit(img: np.ndarray, h: int) -> np.ndarray:
     return cv2.resize(img, (w, h), interpolation=cv2.INTER_NEAREST)
 
 
+class AgentView:
+    """Replays the episode through a fresh agent and draws its `debug_frame` after each decision."""
+
+    def __init__(self, agent, info: dict, h: int) -> None:
+        from ovon.agents.base import is_privileged
+
+        self.agent, self.h = agent, h
+        self.privileged = is_privileged(agent)
+        self.diverged: int | None = None  # step at which the agent's action differed from the record
+        self.last: np.ndarray | None = None
+        agent.reset(info)
+
+    def step(self, t: int, obs: dict, inf: dict, recorded: int | None) -> np.ndarray:
+        """Panel for the frame of step `t`: the agent acts on `obs` (when it has not diverged and an action
+        was recorded there) and draws what it believes."""
+        if self.diverged is None and recorded is not None:
+            if self.privileged:
+                obs = {**obs, "privileged": inf["privileged"]}
+            action = int(self.agent.act(obs))
+            if action != int(recorded):
+                self.diverged = t
+            img = self.agent.debug_frame(self.h)
+            if img is not None:
+                self.last = _fit(np.asarray(img, dtype=np.uint8), self.h)
+        panel = self.last.copy() if self.last is not None else np.full((self.h, self.h, 3), 55, np.uint8)
+        if self.diverged is not None:
+            cv2.putText(panel, f"agent left the record after step {self.diverged}", (6, self.h - 8),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 40, 40), 1, cv2.LINE_AA)
+        return panel
+
+
+def _agent_view(meta: dict, spec, ep_seed: int, sim: SimConfig, h: int) -> AgentView | None:
+    """An AgentView when the run's agent has `debug_frame`, else None."""
+    from ovon.agents import AgentError, load_agent_class, make_agent
+    from ovon.evaluate.runner import episode_info
+
+    cls = load_agent_class(meta["agent"])
+    if not callable(getattr(cls, "debug_frame", None)):
+        return None
+    try:
+        agent = make_agent(meta["agent"], **meta.get("agent_kwargs", {}))
+    except Exception as e:  # noqa: BLE001 - the constructor is user code: one line, with the way out
+        raise AgentError(f"agent {meta['agent']!r} of this run cannot be rebuilt for its debug panel "
+                         f"({type(e).__name__}: {' '.join(str(e).split())[:160]}); fix: pass --no-agent-view") from None
+    return AgentView(agent, episode_info(spec, ep_seed, sim), h)
+
+
 def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: str | None = None,
-                 seed: int | None = None, fps: int = 8, scene: str | None = None) -> Path:
+                 seed: int | None = None, fps: int = 8, scene: str | None = None,
+                 agent_view: bool = True) -> Path:
+    """`agent_view`: add the agent's `debug_frame` panel when its class has one (see the module docstring)."""
     from ovon.env import make_objectnav
     from ovon.evaluate.harness import load_specs
 
@@ -91,34 +148,43 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
     spec = specs[0]
     sim = from_dict(SimConfig, meta["sim"])
     env = make_objectnav(episodes=[spec], sim=sim, task=from_dict(TaskConfig, meta["task"]), privileged=True)
-    obs, info = env.reset(seed=episode_seed(rec["seed"], spec.split, spec.episode_id, spec.scene),
-                          options={"episode": spec})
+    ep_seed = episode_seed(rec["seed"], spec.split, spec.episode_id, spec.scene)
+    obs, info = env.reset(seed=ep_seed, options={"episode": spec})
     p = info["privileged"]
     goals = [(np.asarray(o.aabb_min), np.asarray(o.aabb_max)) for o in p.world.scene.objects if o.id in p.goal_ids]
     top = TopDown(p.grid, np.array([v.position for v in p.viewpoints]), goals, size=360)
     path = [p.state.position]
     frames = []
     h = 240
+    actions = [int(a) for a in rec["actions"]]
+    view = _agent_view(meta, spec, ep_seed, sim, h) if agent_view else None
 
-    def frame(o, inf, text):
+    def frame(o, inf, text, t):
         rgb = _fit(o["rgb"], h)
         depth = _fit(_depth_to_rgb(o["depth"], sim.camera.max_depth), h)
         td = _fit(top.draw(path, inf["privileged"].state.yaw), h)
-        img = np.concatenate([rgb, depth, td], axis=1)
+        panels = [rgb, depth, td]
+        if view is not None:
+            panels.append(view.step(t, o, inf, actions[t] if t < len(actions) else None))
+        img = np.concatenate(panels, axis=1)
         bar = np.full((28, img.shape[1], 3), 255, np.uint8)
         cv2.putText(bar, text, (6, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
         return np.concatenate([bar, img], axis=0)
 
-    frames.append(frame(obs, info, f"goal: {spec.goal_category}  step 0  d={p.distance_to_goal:.2f} m"))
+    frames.append(frame(obs, info, f"goal: {spec.goal_category}  step 0  d={p.distance_to_goal:.2f} m", 0))
     names = ("STOP", "FORWARD", "LEFT", "RIGHT", "UP", "DOWN")
-    for t, a in enumerate(rec["actions"], 1):
+    for t, a in enumerate(actions, 1):
         obs, _, term, trunc, info = env.step(a)
         path.append(info["privileged"].state.position)
         frames.append(frame(obs, info, f"goal: {spec.goal_category}  step {t} {names[a]}  "
-                                       f"d={info['privileged'].distance_to_goal:.2f} m"))
+                                       f"d={info['privileged'].distance_to_goal:.2f} m", t))
         if term or trunc:
             break
     env.close()
+    if view is not None and view.diverged is not None:
+        warnings.warn(f"{meta['agent']} replayed through a fresh agent chose another action than the record after "
+                      f"step {view.diverged} (not deterministic given the episode seed?): its panel stops there",
+                      stacklevel=2)
     verdict = "SUCCESS" if rec["success"] else f"FAIL: {rec['failure']}"
     last = frames[-1].copy()
     cv2.putText(last, verdict, (8, 60), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 0, 0), 2, cv2.LINE_AA)

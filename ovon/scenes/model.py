@@ -54,6 +54,23 @@ class ObjectInstance:
         return f"{self.raw_label}_{self.id}"
 
 
+def footprint_distance(obj: ObjectInstance, xz: np.ndarray) -> np.ndarray:
+    """Floor-plane distance from points (N, 2) to the object's oriented box footprint (0 inside): the
+    measure of the 1 m viewpoint band (dataset generation) and of an episode's final distance to its goal."""
+    R = np.asarray(obj.obb_rotation, dtype=np.float64)
+    c = np.asarray(obj.obb_center, dtype=np.float64)
+    he = np.asarray(obj.obb_half_extents, dtype=np.float64)
+    xz = np.asarray(xz, dtype=np.float64).reshape(-1, 2)
+    d3 = np.zeros((len(xz), 3))
+    d3[:, 0] = xz[:, 0] - c[0]
+    d3[:, 2] = xz[:, 1] - c[2]
+    local = d3 @ R  # world -> box frame (columns of R are the box axes)
+    # Yaw-only boxes: local x/z span the floor plane. For tilted boxes this is still a bound.
+    ex = np.maximum(np.abs(local[:, 0]) - he[0], 0.0)
+    ez = np.maximum(np.abs(local[:, 2]) - he[2], 0.0)
+    return np.hypot(ex, ez)
+
+
 @dataclass
 class Region:
     id: int

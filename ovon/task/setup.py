@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ovon.config.task import TaskConfig
+from ovon.scenes.model import footprint_distance
 from ovon.sim.geodesic import DistanceField, distance_field
 from ovon.sim.types import AgentState
 from ovon.sim.world import World
@@ -73,15 +74,23 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
         start_pos = _random_reachable_start(grid, field, rng, task.success_distance)
     yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
     goal_ids = frozenset(o.id for o in objs)
+    on_floor = [o for o in objs if world.nav.grid_for(o.aabb_min) is grid] or objs
     coverage = None
     if task.reward.kind == "dense" and task.reward.dense_coverage != 0.0:
         from ovon.task.coverage import Coverage
 
         coverage = Coverage(grid, fov_deg, task.reward.coverage_range_m)
     tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=goal_ids, cfg=task,
-                             distractors=distractors(world.scene, spec.goal_categories), coverage=coverage)
+                             distractors=distractors(world.scene, spec.goal_categories), coverage=coverage,
+                             object_distance_fn=lambda p: object_floor_distance(on_floor, p))
     state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
     return EpisodeSetup(state, grid, field, list(viewpoints), goal_ids, tracker)
+
+
+def object_floor_distance(objects: list, position: np.ndarray) -> float:
+    """Floor-plane distance from a position to the nearest of the objects' oriented box footprints."""
+    xz = np.asarray(position, dtype=np.float64)[[0, 2]][None]
+    return min(float(footprint_distance(o, xz)[0]) for o in objects)
 
 
 def _random_reachable_start(grid, field: DistanceField, rng: np.random.Generator, min_distance: float) -> np.ndarray:

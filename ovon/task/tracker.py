@@ -52,6 +52,10 @@ class EpisodeMetrics:
     called_stop: bool
     goal_seen: bool
     failure: str | None  # one of FAILURE_LABELS, None on success
+    # where the episode ended, for failure analysis: floor distance to the nearest goal box footprint on the
+    # episode's floor (None when the tracker has no boxes), and whether a goal shows in the last frame
+    distance_to_object: float | None = None
+    goal_in_view: bool = False
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -67,6 +71,7 @@ class EpisodeTracker:
     distractors: list[Distractor] = field(default_factory=list)
     coverage: object = None  # ovon.task.coverage.Coverage when the reward has an exploration term
     goal_known: bool = False  # PointNav: the goal is given, so it counts as seen from the start
+    object_distance_fn: object = None  # callable(position (3,)) -> floor distance to the nearest goal box
 
     def reset(self, position: np.ndarray, semantic: np.ndarray | None = None, yaw: float | None = None) -> None:
         self.position = np.asarray(position, dtype=np.float64).copy()
@@ -178,6 +183,7 @@ class EpisodeTracker:
 
     def metrics(self) -> EpisodeMetrics:
         d0, dt, L = self.d0, self.distance, self.path_length
+        to_object = None if self.object_distance_fn is None else float(self.object_distance_fn(self.position))
         if not math.isfinite(d0):
             raise ValueError("the start is not connected to any goal viewpoint (distance is inf)")
         eff = 1.0 if d0 <= 0 else d0 / max(d0, L)
@@ -195,4 +201,6 @@ class EpisodeTracker:
             called_stop=self.called_stop,
             goal_seen=self.goal_seen,
             failure=self.failure_label(),
+            distance_to_object=to_object,
+            goal_in_view=bool(self.goal_ids & self.in_view_ids),
         )

@@ -76,6 +76,8 @@ class NavigatorConfig:
     lookahead_m: float = 1.0  # furthest path cell in line of sight used as the heading target
     goal_ring_bins: int = 12  # plan to the nearest free cell in each of this many directions around a goal
     escape_radius_m: float = 0.5  # on a cell its map blocks, the agent first heads to a free cell this close
+    # geometric: STOP after this many steps within one forward step of the stop radius without getting closer
+    settle_steps: int = 12
     checkpoint: str = ""  # for learned navigators: policy.pt of `ovon train --task pointnav` (or its run folder)
     # learned: the policy's memory restarts when the target moves further than this (a new frontier, or a
     # goal point lifted elsewhere); smaller moves are the same target seen better
@@ -98,6 +100,8 @@ class NavigatorConfig:
                                  "pointnav` (or its run folder)")
         if self.goal_ring_bins < 1:
             raise ValueError(f"navigator.goal_ring_bins = {self.goal_ring_bins!r} must be >= 1")
+        if self.settle_steps < 1:
+            raise ValueError(f"navigator.settle_steps = {self.settle_steps!r} must be >= 1")
 
 
 @dataclass(frozen=True)

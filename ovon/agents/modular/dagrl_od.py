@@ -11,8 +11,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from ovon.agents.modular.config import DAgRLODConfig, modular_config
 from ovon.agents.modular.core import ModularCore
+from ovon.agents.modular.debug import draw_beliefs
 
 
 def describe_dagrl_od(cfg: DAgRLODConfig, policy_perception: str | None = None) -> str:
@@ -82,3 +85,10 @@ class DAgRLODAgent:
                 return core.record(action)
         # before the detector fired, or the goal cannot be reached on the agent's map: the policy acts
         return core.record(int(self.policy.act(observation)))
+
+    def debug_frame(self, size: int = 240) -> np.ndarray | None:
+        """What the agent believes now (`ovon video`): its maps, goal points and plan (no value map)."""
+        if self.core.maps is None:
+            return None
+        who = "bee-lining" if self.beelining else "policy"
+        return draw_beliefs(self.core, size, title=f"DAgRL+OD: {who}")

@@ -33,7 +33,9 @@ class GoalMemory:
             if eroded.any():  # a small mask is kept whole rather than lost
                 pix = eroded
         cam = self.projector.camera
-        pix &= (depth < cam.max_depth * self.cfg.max_range_fraction) & (depth >= self.cfg.min_range_m)
+        # a pixel at the sensor's minimum is clamped, not measured: the surface is nearer, somewhere on the ray
+        near = max(self.cfg.min_range_m, cam.min_depth + 1e-4)
+        pix &= (depth < cam.max_depth * self.cfg.max_range_fraction) & (depth >= near)
         rr, cc = np.nonzero(pix)
         k = self.cfg.points_per_detection
         if rr.size > k:  # an evenly spaced subset: the nearest point barely moves, the cost is bounded

@@ -27,7 +27,10 @@ from ovon.agents.modular.config import NavigatorConfig
 from ovon.agents.modular.maps import AgentMaps
 from ovon.agents.modular.sensors import Pose2D, Sensors
 from ovon.experts.control import (
+    MOVE_FORWARD,
     STOP,
+    TURN_LEFT,
+    TURN_RIGHT,
     Steering,
     action_towards,
     frontier_search,
@@ -36,6 +39,7 @@ from ovon.experts.control import (
     trace_parents,
 )
 from ovon.plugins import load_named
+from ovon.sim.collision import forward_delta
 
 
 @dataclass
@@ -74,6 +78,14 @@ class GeometricNavigator:
     `turn_threshold_deg` off, else MOVE_FORWARD, with the expert's `Steering` detours around obstacles the
     map predicts (and the bump sensor reports). An agent standing on a cell its map calls blocked (an
     obstacle seen within its radius) first drives to the nearest navigable cell.
+
+    Final approach: within one forward step of the stop radius the agent heads for the goal point itself
+    (the smallest turn after which one MOVE_FORWARD, free on the map, lands inside the radius), as a
+    point-goal policy does. Following the plan there instead, the agent can circle a ring cell a few cm
+    away that 0.25 m steps overshoot, just outside the radius until the step limit. Where no single step
+    lands inside (the free space near the goal is narrower than the turns allow), the agent STOPs after
+    `settle_steps` steps within one step of the radius without getting 5 cm closer: it is as close as its
+    actions get it.
     """
 
     name = "geometric"
@@ -97,8 +109,12 @@ class GeometricNavigator:
         self._stamp_id = 0
         self.lookahead_cells = max(1, int(round(cfg.lookahead_m / maps.cell_size)))
         self.path: tuple[np.ndarray, np.ndarray] | None = None
+        self._settle_best = math.inf  # closest approach to the goal point within one step of the radius
+        self._settle_steps = 0  # steps there since it last improved
 
     def reset(self) -> None:
+        self._settle_best = math.inf
+        self._settle_steps = 0
         self.steering.reset()
         self._stamp[:] = 0
         self._stamp_id = 0
@@ -175,11 +191,47 @@ class GeometricNavigator:
         return trace_parents(self._parent, int(tr[best]), int(tc[best]), m.shape[1])
 
     # -- acting ---------------------------------------------------------------------------------
+    def final_approach(self, pose: Pose2D, target: tuple[float, float]) -> int | None:
+        """The first action of the smallest turn (then MOVE_FORWARD) whose forward step is free on the map and
+        ends within the stop distance of `target`; None when no heading does (or the target is farther)."""
+        st = self.steering
+        stop = self.cfg.stop_distance_m
+        if math.hypot(target[0] - pose.x, target[1] - pose.z) >= stop + st.step:
+            return None
+        n = int(round(math.pi / st.turn))
+        for k in sorted(range(-n, n + 1), key=lambda k: (abs(k), -k)):  # straight first, left before right
+            h = pose.yaw + k * st.turn
+            dx, dz = forward_delta(h, st.step)
+            if math.hypot(pose.x + dx - target[0], pose.z + dz - target[1]) >= stop or not st.free(pose.position, h):
+                continue
+            return MOVE_FORWARD if k == 0 else (TURN_LEFT if k > 0 else TURN_RIGHT)
+        return None
+
+    def _settled(self, rho: float) -> bool:
+        """Within one step of the stop radius for `settle_steps` steps without getting 5 cm closer."""
+        if rho >= self.cfg.stop_distance_m + self.steering.step:
+            self._settle_best, self._settle_steps = math.inf, 0
+            return False
+        if rho < self._settle_best - 0.05:
+            self._settle_best, self._settle_steps = rho, 0
+            return False
+        self._settle_steps += 1
+        return self._settle_steps >= self.cfg.settle_steps
+
     def act(self, observation: dict, request: NavRequest) -> int | None:
         pose = request.pose
         if request.kind == "goal" and request.rho < self.cfg.stop_distance_m:
             self.steering.record(pose.position, pose.yaw, STOP)
             return STOP
+        if request.kind == "goal":
+            if self._settled(request.rho):
+                self.steering.record(pose.position, pose.yaw, STOP)
+                return STOP
+            action = self.final_approach(pose, request.target)
+            if action is not None:
+                self.path = None
+                self.steering.record(pose.position, pose.yaw, action)
+                return action
         m = self.maps
         if request.kind == "goal":
             tr, tc = self._goal_targets(*request.target)

@@ -16,8 +16,11 @@ import math
 import time
 from typing import Any
 
+import numpy as np
+
 from ovon.agents.modular.config import VLFMConfig, modular_config
 from ovon.agents.modular.core import ModularCore, episode_seed
+from ovon.agents.modular.debug import draw_beliefs
 from ovon.agents.modular.frontier_choice import FrontierChooser
 from ovon.agents.modular.value_map import ValueMap
 from ovon.models.scorers import describe_scorer, make_scorer
@@ -111,6 +114,13 @@ class VLFMAgent:
                 self.mode = "navigate"
                 return core.record(action)
         return core.record(self._explore(observation))
+
+    def debug_frame(self, size: int = 240) -> np.ndarray | None:
+        """What the agent believes now (`ovon video`): its maps, frontiers, goal points, plan and value map."""
+        if self.core.maps is None or self.value_map is None:
+            return None
+        target = self.chooser.target if self.chooser is not None and self.mode == "explore" else None
+        return draw_beliefs(self.core, size, self.value_map, target, f"VLFM: {self.mode}")
 
     # -- exploration ----------------------------------------------------------------------------
     def _stuck(self, target: int, dist: float) -> bool:
