@@ -478,8 +478,8 @@ def other_cases(w: World) -> list[Case]:
                           (["--pitch", "1000"], "--pitch"), (["--pose", "1e308,0,0,0"], "--pose"),
                           (["--seed", "-1"], "--seed"), (["--out", str(w.work)], "--out"),
                           (["--out", str(w.work / "v.jpg")], ".png")]:
-        cases.append(Case("sim", ["sim", "view", "procedural:3", *extra, "--out", str(w.work / "v.png")], "error",
-                          (needle,)))
+        out = [] if "--out" in extra else ["--out", str(w.work / "v.png")]
+        cases.append(Case("sim", ["sim", "view", "procedural:3", *extra, *out], "error", (needle,)))
     cases.append(Case("sim", ["sim", "view", str(w.work / "missing.glb"), "--out", str(w.work / "v.png")], "error",
                       ("missing.glb",)))
     cases.append(Case("sim", ["sim", "view", "procedural:x", "--out", str(w.work / "v.png")], "error",
