@@ -11,7 +11,7 @@ run only warms up the numba kernels and is not counted.
 Reported per map size: median / p95 / mean / max ms of `act` (wall clock around the call; `act_cpu` =
 the calling thread's CPU time, robust to other processes sharing the cores) and of its phases
 (visibility, frontier update, choice = decision incl. frontier choice and path following),
-reset ms, steps, success rate. Reference (expert.md): an upstream-like expert cost about 2 ms/step at
+reset ms, steps, success rate. Reference (docs/spec.md#expert-speed): an upstream-like expert cost about 2 ms/step at
 128x128 and 8 ms/step at 400x400 on a 2-core machine.
 """
 

@@ -1,5 +1,6 @@
 """`package.module:Name` loading, the one way users plug their own classes in (agents, detectors,
-image-text scorers, point-goal navigators).
+image-text scorers, point-goal navigators), and the one dispatch from a config value to a class: a
+built-in's name looked up in its table (name -> `package.module:Class`), else the value itself.
 
 Why one place: the module is looked up on `sys.path` and, for the `ovon` console script (which does not
 put the working directory there), in the working directory, so `my_agent:MyAgent` next to the user's data
@@ -51,6 +52,23 @@ def load_object(spec: str) -> Any:
             raise PluginError(f"module {module_name!r} has no attribute {attr!r}")
         obj = getattr(obj, part)
     return obj
+
+
+def lookup(name: str, table: dict[str, str]) -> str | None:
+    """The `package.module:Name` that `name` stands for: its entry in `table` (the built-ins), or `name`
+    itself when it has that form; None when it is neither."""
+    target = table.get(name, name)
+    return target if is_spec(target) else None
+
+
+def load_named(name: str, table: dict[str, str], key: str) -> type:
+    """The class config value `key` = `name` picks (a built-in by name, or `package.module:Class`); one
+    PluginError line naming the key, the value and the valid names when it cannot."""
+    fix = f"one of {list(table)} or package.module:Class"
+    target = lookup(name, table)
+    if target is None:
+        raise PluginError(f"{key} = {name!r} is unknown; use {fix}")
+    return load_class(target, key, fix)
 
 
 def load_class(spec: str, key: str, fix: str) -> type:

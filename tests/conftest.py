@@ -53,7 +53,8 @@ def tiny_scenes(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_dataset(tiny_scenes, tmp_path_factory) -> Path:
-    from ovon.dataset.generate import VAL_SPLITS, generate
+    from ovon.dataset.generate import generate
+    from ovon.dataset.io import VAL_SPLITS
 
     out = tmp_path_factory.mktemp("episodes") / "ovon_episodes"
     generate(tiny_scenes, out, tiny_generation_config(), splits=VAL_SPLITS, workers=1, progress=False)

@@ -136,3 +136,59 @@ def test_odometry_relative_to_start_and_noise_bounded():
     assert abs(n[2] - est[2]) <= math.radians(2.0) + 1e-12
     s = k.step(s, TURN_LEFT).state
     np.testing.assert_allclose(clean.update(s), [0.25, 0.0, math.radians(30)], atol=1e-9)
+
+
+def _walk(k, s, actions):
+    for a in actions:
+        s = k.step(s, a).state
+        yield s
+
+
+def test_bounded_odometry_error_never_accumulates():
+    """The paper's model: each reading is the truth plus a fresh error within the bounds, at any step."""
+    k = Kinematics(BoxGrid(), AgentConfig(allow_sliding=True))
+    s0 = state(2.0, 2.0, 0)
+    clean, noisy = Odometry(), Odometry(OdometryNoise(0.007, 2.0))
+    clean.reset(s0)
+    noisy.reset(s0)
+    rng = np.random.default_rng(1)
+    actions = [TURN_LEFT, MOVE_FORWARD, MOVE_FORWARD, TURN_RIGHT, MOVE_FORWARD] * 100
+    for s in _walk(k, s0, actions):
+        e = clean.update(s)
+        n = noisy.update(s, rng)
+        assert np.all(np.abs(n[:2] - e[:2]) <= 0.007 + 1e-12)
+        assert abs(math.remainder(n[2] - e[2], 2 * math.pi)) <= math.radians(2.0) + 1e-12
+
+
+def test_drift_odometry_integrates_along_the_estimated_heading():
+    """Dead reckoning: a heading error bends later translation, so the position error outgrows one step's bound."""
+    k = Kinematics(BoxGrid(), AgentConfig(allow_sliding=True))
+    s0 = state(2.0, 2.0, 0)
+    clean, drift = Odometry(mode="drift"), Odometry(OdometryNoise(0.007, 2.0), mode="drift")
+    truth = Odometry()
+    for o in (clean, drift, truth):
+        o.reset(s0)
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    actions = [TURN_LEFT, MOVE_FORWARD, MOVE_FORWARD, TURN_RIGHT, MOVE_FORWARD, TURN_RIGHT] * 80
+    for s in _walk(k, s0, actions):
+        t = truth.update(s)
+        np.testing.assert_allclose(clean.update(s), t, atol=1e-9)  # noiseless dead reckoning is exact
+        d = drift.update(s, rng)
+        worst = max(worst, float(np.hypot(*(d[:2] - t[:2]))))
+    assert worst > 0.05  # many times the 7 mm bound of one reading
+
+
+def test_unknown_odometry_mode_is_a_clear_error():
+    with pytest.raises(ValueError, match="odometry mode 'wobbly'"):
+        Odometry(mode="wobbly")
+
+
+def test_noise_option_picks_the_odometry_mode():
+    from ovon.config.base import ConfigError
+    from ovon.evaluate.harness import parse_noise
+
+    assert parse_noise("odometry").odometry_mode == "bounded"
+    assert parse_noise("actuation,odometry:drift").odometry_mode == "drift"
+    with pytest.raises(ConfigError, match="odometry\\[:bounded\\|drift\\]"):
+        parse_noise("odometry:wobbly")

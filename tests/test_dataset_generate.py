@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ovon.dataset.generate import VAL_SPLITS, generate, largest_remainder
-from ovon.dataset.io import EpisodeDataset, goals_for
+from ovon.dataset.generate import generate, largest_remainder
+from ovon.dataset.io import VAL_SPLITS, EpisodeDataset, goals_for
 from ovon.dataset.stats import dataset_stats
 from ovon.dataset.validate import validate_dataset
 from tests.conftest import tiny_generation_config

@@ -1,5 +1,5 @@
 """Failure analysis through the real environment: scripted trajectories in a hand-built room with a
-"couch" goal and a "toaster" distractor, each label of task.md checked from `info["metrics"]`.
+"couch" goal and a "toaster" distractor, each label of docs/spec.md#failure-labels checked from `info["metrics"]`.
 
 Room interior [0, 6] x [0, 4] (x, z), floor y = 0, walls 2.5 m. Couch box x 0.3-1.5, z 0.2-0.9 (0.8 m
 high) in the -z/-x corner; toaster box x 4.8-5.5, z 0.2-0.8 (0.6 m high) in the -z/+x corner. Yaw 0 looks
@@ -106,11 +106,19 @@ def test_success(env):
 
 
 def test_stop_wrong_object(env):
-    # straight at the toaster (the couch is ~70 deg off-axis, out of the 60 deg view), STOP 0.7 m from it
-    info = run(env, (5.15, 0.0, 3.5), 0.0, [F] * 8 + [S])
+    # straight at the toaster (the couch is ~70 deg off-axis, out of the 60 deg view), 0.7 m from it, look
+    # down at it and STOP: the toaster is in the STOP frame
+    info = run(env, (5.15, 0.0, 3.5), 0.0, [F] * 8 + [LOOK_DOWN, S])
     m = info["metrics"]
     assert not m["success"] and not m["goal_seen"]
     assert m["failure"] == "stop_wrong_object"
+
+
+def test_stop_next_to_an_object_out_of_view_is_not_wrong_object(env):
+    # the same walk without looking down: at 0.7 m the toaster has left the view, so the STOP says nothing
+    # about it (it was seen on the way)
+    info = run(env, (5.15, 0.0, 3.5), 0.0, [F] * 8 + [S])
+    assert info["metrics"]["failure"] == "stop_never_saw_goal"
 
 
 def test_stop_never_saw_goal(env):

@@ -126,7 +126,7 @@ def test_released_format_episode_runs_end_to_end(tmp_path):
     assert summary["splits"]["val_seen"]["episodes"] == 1
     (rec,) = read_records(tmp_path / "run")
     assert rec["success"] and rec["spl"] > 0.8
-    # The dataset folder itself also works as --scenes (dataset.md resolution rule).
+    # The dataset folder itself also works as --scenes (docs/spec.md#episode-records: the scene_id rule).
     specs = load_specs(str(data), str(scenes / "hm3d"), "val_seen", None)
     assert specs[0].scene.endswith("FixtureScn01.glb")
 

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+import torch
 from rich.console import Console
 
 from ovon.experiments import (
@@ -53,7 +54,7 @@ def test_every_definition_resolves_at_every_scale(scale: str, tmp_path: Path) ->
     plan = resolve(all_experiments(), scale, tmp_path)
     trains = {c.name: c for c in plan.cells.values() if c.kind == "train"}
     evals = {c.name: c for c in plan.cells.values() if c.kind == "eval"}
-    assert len(trains) == 14 and len(evals) == 18
+    assert len(trains) == 14 and len(evals) == 20
     recipes = load_catalogue().recipes
     for name, cell in trains.items():
         assert isinstance(cell.train_cfg, TrainConfig), name
@@ -312,10 +313,124 @@ def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path
     assert (tmp_path / "report" / "figures" / "curve_t-ft.png").is_file()
     assert (tmp_path / "report" / "figures" / "tiny_exp_table.png").is_file()
 
+    # what each attempt ran with is recorded, the killed one included, and the resolved config
+    ft = _record(root, "train:t-ft")
+    assert [h["rc"] for h in ft["history"]] == ["killed", 0] and all(h["code"] == ft["code"] for h in ft["history"])
+    assert ft["code"].startswith("ovon ") and ft["config"]["algo"] == "ppo"
+    assert ft["config"]["text_cache"] == "$ROOT/tiny/data/text_cache.pt"
+    assert _record(root, "eval:t-ft")["config"]["agent_kwargs"]["checkpoint"] == "$ROOT/tiny/train/t-ft/policy.pt"
+    assert "episodes_per_val_split" in _record(root, "data:data")["config"]
+
+    # provenance: one clean commit says so at the top; another commit or a dirty tree marks what rests on it
+    def codes(cid: str, *texts: str) -> None:
+        rec = _record(root, cid)
+        rec["code"] = texts[-1]
+        rec["history"] = [{**h, "code": t} for h, t in zip(rec["history"], [*texts[:-1], *[texts[-1]] * 9])]
+        (root / "tiny" / "cells" / f"{cid.replace(':', '-')}.json").write_text(json.dumps(rec))
+
+    def entries() -> dict:
+        data = json.loads((tmp_path / "report" / "report.json").read_text())
+        return {r["name"]: r["cells"]["val_seen"]["marked"] for r in data["experiments"]["tiny_exp"]["table"]["rows"]}
+
+    for cid in ("data:data", "train:t-dagger", "train:t-ft", "eval:t-dagger", "eval:t-ft"):
+        codes(cid, "ovon 0.1.0 (1111111)")
+    text = build_report(plan, tmp_path / "report").read_text()
+    assert "Provenance: every finished cell ran with ovon 0.1.0 (1111111) from a clean tree" in text.splitlines()[2]
+    assert "†" not in text and entries() == {"DAgger": False, "DAgRL": False, "Missing": False}
+    codes("eval:t-ft", "ovon 0.1.0 (2222222+dirty)")
+    text = build_report(plan, tmp_path / "report").read_text()
+    assert "1 cell(s) ran with another commit than ovon 0.1.0 (1111111)" in text.splitlines()[2]
+    assert "| eval:t-ft | done | 2222222 | dirty | recorded | † other commit (2222222); dirty tree |" in text
+    assert entries() == {"DAgger": False, "DAgRL": True, "Missing": False}
+    assert "# eval:t-ft: done" in text and "(2222222+dirty) †" in text
+    codes("eval:t-ft", "ovon 0.1.0 (1111111)")
+    codes("train:t-dagger", "ovon 0.1.0 (3333333)", "ovon 0.1.0 (1111111)")  # resumed across commits
+    text = build_report(plan, tmp_path / "report").read_text()
+    assert "attempts ran with 2 commits (3333333, 1111111)" in text and "| t-dagger† |" in text
+    assert entries() == {"DAgger": True, "DAgRL": True, "Missing": False}  # DAgRL starts from DAgger
+
     # a changed definition is refused before any work, with the fix
     with pytest.raises(DefinitionError, match="--redo"):
         run(resolve([load_experiment(str(exp_file))], "tiny", root, [*TINY_SET, "data.train_scenes=2"]),
             console=quiet())
+
+
+RESUME = """
+title: resume test
+paper_ref: none
+train:
+  r-ppo: {recipe: rl, scales: {tiny: {set: {max_updates: 10}}}}
+evaluate:
+  r-eval: {agent: policy, checkpoint: r-ppo, splits: [val_seen]}
+table:
+  caption: test
+  columns: [{name: val_seen, split: val_seen}]
+  rows: [{name: RL, eval: r-eval, paper: {val_seen: [39.2, 0.4, 18.7, 0.2]}}]
+"""
+
+
+@pytest.mark.slow
+def test_a_training_cell_killed_after_update_k_continues_to_the_same_weights(tmp_path: Path) -> None:
+    """Runs that outlast a sitting: SIGKILL the runner's process group (runner and `ovon train` child)
+    once the training cell has checkpointed update 3 of 10; the same `ovon experiment run` continues it
+    (`ovon train --resume`) to the weights of a run that was never interrupted."""
+    from ovon.experiments.state import last_update
+    from ovon.models.policy import ActorCritic
+
+    exp_file = _write(tmp_path / "resume_exp.yaml", RESUME)
+    root = tmp_path / "root"
+    args = ["experiment", "run", str(exp_file), "--scale", "tiny", "--root", str(root), "--no-report", "--only",
+            "train:r-ppo", *(a for s in TINY_SET for a in ("--set", s))]
+    folder = root / "tiny" / "train" / "r-ppo"
+    proc = subprocess.Popen([sys.executable, "-m", "ovon.cli.main", *args], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+    deadline = time.time() + 400
+    try:
+        while time.time() < deadline:
+            if (folder / "checkpoint.pt").is_file() and (last_update(folder) or 0) >= 3:
+                break
+            assert proc.poll() is None, proc.stdout.read().decode()
+            time.sleep(0.1)
+        else:
+            pytest.fail("the training cell never reached update 3")
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    killed_at = last_update(folder)
+    assert killed_at is not None and 3 <= killed_at < 10
+    first_line = (folder / "metrics.jsonl").read_text().splitlines()[0]  # its "time" is the first attempt's
+    rec = _record(root, "train:r-ppo")
+    assert rec["state"] == "running" and rec["attempts"] == 1
+    child = rec["pid"]
+    for _ in range(50):
+        if not _alive(child):
+            break
+        time.sleep(0.2)
+    assert not _alive(child)
+
+    from ovon.cli.main import main
+
+    with contextlib.redirect_stdout(io.StringIO()) as out:
+        assert main(args) == 0  # the same command continues the cell
+    assert "--resume" in out.getvalue()
+    rec = _record(root, "train:r-ppo")
+    assert rec["state"] == "done" and rec["attempts"] == 2 and last_update(folder) == 10
+    assert "--resume" in (root / "tiny" / "logs" / "train-r-ppo.log").read_text()
+    assert (folder / "metrics.jsonl").read_text().splitlines()[0] == first_line  # continued, not restarted
+
+    # the same cell never interrupted (another root, reading the first one's data)
+    data = root / "tiny" / "data"
+    straight = resolve([load_experiment(str(exp_file))], "tiny", tmp_path / "straight",
+                       [*TINY_SET, "data.source=paths", f"data.episodes={data / 'episodes'}",
+                        f"data.scenes={data / 'scenes'}"])
+    assert run(straight, only=["train:r-ppo"], write_report=False, console=quiet()).ran == ["train:r-ppo"]
+    assert _record(tmp_path / "straight", "train:r-ppo")["attempts"] == 1
+    a = ActorCritic.load(folder / "policy.pt").state_dict()
+    b = ActorCritic.load(tmp_path / "straight" / "tiny" / "train" / "r-ppo" / "policy.pt").state_dict()
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
 def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:

@@ -140,20 +140,77 @@ def test_line_of_sight():
     assert g.line_of_sight(a, b, mask=np.ones_like(g.navigable))
 
 
-def test_cache_returns_same_object_and_disk_cache(tmp_path, monkeypatch):
+def test_cache_returns_same_object_and_disk_cache(tmp_path):
     scene = scene_from_boxes(empty_floor(3, 3), floor_heights=[0.0])
     a = build_navigation(scene)
     assert build_navigation(scene) is a
     assert build_navigation(scene, AgentConfig(radius=0.3)) is not a
-    monkeypatch.setenv("OVON_CACHE_DIR", str(tmp_path))
+    assert not list(tmp_path.iterdir())  # no folder given: nothing on disk
     clear_cache()
-    b = build_navigation(scene)
-    assert list(tmp_path.glob("nav_*.npz"))
+    b = build_navigation(scene, cache_dir=tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == [f"nav_{b.key}.npz"]  # no temp file left behind
     clear_cache()
-    c = build_navigation(scene)
+    c = build_navigation(scene, cache_dir=tmp_path)
     assert c is not b
     assert np.array_equal(c.floors[0].navigable, a.floors[0].navigable)
     assert np.array_equal(c.floors[0].islands, a.floors[0].islands)
+
+
+def _torn(path):  # what kill -9 during a non-atomic write leaves: half a zip
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+
+
+def _other_keys(path):  # a readable npz that is not a grid cache (another version's layout)
+    np.savez(path.open("wb"), something=np.zeros(3))
+
+
+@pytest.mark.parametrize("damage", [_torn, lambda p: p.write_bytes(b""), lambda p: p.write_bytes(b"PK\x03\x04junk"),
+                                    _other_keys], ids=["torn", "empty", "garbage", "other-keys"])
+def test_a_corrupt_cache_file_is_a_miss_rebuilt_and_replaced(tmp_path, damage):
+    scene = scene_from_boxes(room_boxes(0, 0, 4, 3), floor_heights=[0.0])
+    clear_cache()
+    good = build_navigation(scene, cache_dir=tmp_path)
+    path = tmp_path / f"nav_{good.key}.npz"
+    damage(path)
+    clear_cache()
+    again = build_navigation(scene, cache_dir=tmp_path)  # BadZipFile / EOFError / KeyError: all a miss
+    assert np.array_equal(again.floors[0].navigable, good.floors[0].navigable)
+    with np.load(path) as z:  # the bad file was replaced by a good one
+        assert int(z["n"]) == 1 and np.array_equal(z["free0"], good.floors[0].free)
+    clear_cache()
+    assert np.array_equal(build_navigation(scene, cache_dir=tmp_path).floors[0].islands, good.floors[0].islands)
+
+
+def test_two_processes_building_the_same_scene_at_once_both_succeed(tmp_path):
+    """Both compute, write and re-read the same cache file at the same moments (a start barrier, then
+    rounds that clear the in-process cache): unique temp names + rename, so no one reads a torn file."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    go = tmp_path / "go"
+    script = (
+        "import sys, time, zlib\n"
+        "from pathlib import Path\n"
+        "from ovon.sim.navgrid import build_navigation, clear_cache\n"
+        "from tests.meshes import room_boxes, scene_from_boxes\n"
+        "scene = scene_from_boxes(room_boxes(0, 0, 6, 5), floor_heights=[0.0])\n"
+        "while not Path(sys.argv[1]).exists(): time.sleep(0.01)\n"
+        "sums = set()\n"
+        "for _ in range(12):\n"
+        "    clear_cache()\n"
+        "    sums.add(zlib.crc32(build_navigation(scene, cache_dir=sys.argv[2]).floors[0].navigable.tobytes()))\n"
+        "print(sorted(sums))\n"
+    )
+    procs = [subprocess.Popen([sys.executable, "-c", script, str(go), str(tmp_path / "nav")], cwd=root,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    go.touch()
+    outs = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [e[-2000:] for _, e in outs]
+    assert outs[0][0] == outs[1][0] and len(json.loads(outs[0][0])) == 1  # one answer, the same in both
+    assert [p.suffix for p in (tmp_path / "nav").iterdir()] == [".npz"]  # one file, no temp files left
 
 
 def test_ten_cm_gap_is_not_a_connection():

@@ -42,3 +42,42 @@ def test_factories_name_their_key(factory: str) -> None:
 
         with pytest.raises(PluginError, match=r"^value.scorer.kind = 'no_such_pkg_x:D': cannot import"):
             make_scorer(ScorerConfig(kind="no_such_pkg_x:D"))
+
+
+def test_one_dispatch_for_built_ins_and_plug_ins() -> None:
+    """Agents, detectors, scorers and navigators pick their class the same way: a name in the built-in table
+    (each entry loads), else `package.module:Class`, else one line naming the key and the valid names."""
+    import inspect
+
+    from ovon.agents import BUILTIN as AGENTS
+    from ovon.agents.modular.navigation import NAVIGATORS
+    from ovon.models.detectors import BUILTIN as DETECTORS
+    from ovon.models.scorers import BUILTIN as SCORERS
+    from ovon.plugins import load_named, load_object, lookup
+
+    for table in (AGENTS, NAVIGATORS, DETECTORS, SCORERS):
+        for name, spec in table.items():
+            assert lookup(name, table) == spec and inspect.isclass(load_object(spec)), spec
+    assert lookup("json:JSONDecoder", DETECTORS) == "json:JSONDecoder" and lookup("nope", DETECTORS) is None
+    with pytest.raises(PluginError, match=r"^detector.kind = 'yolo' is unknown; use one of \['oracle', 'owlv2'\]"):
+        load_named("yolo", DETECTORS, "detector.kind")
+
+
+@pytest.mark.parametrize("factory", ["detector", "scorer", "navigator"])
+def test_factories_refuse_an_unknown_name_in_one_line(factory: str) -> None:
+    if factory == "detector":
+        from ovon.models.detectors import DetectorConfig, make_detector
+
+        with pytest.raises(PluginError, match=r"^detector.kind = 'nope' is unknown; use one of \['oracle', 'owlv2'\]"):
+            make_detector(DetectorConfig(kind="nope"))
+    elif factory == "scorer":
+        from ovon.models.scorers import ScorerConfig, make_scorer
+
+        with pytest.raises(PluginError, match=r"^value.scorer.kind = 'nope' is unknown; use one of \['oracle-vl'"):
+            make_scorer(ScorerConfig(kind="nope"))
+    else:
+        from ovon.agents.modular.config import NavigatorConfig
+        from ovon.agents.modular.navigation import make_navigator
+
+        with pytest.raises(PluginError, match=r"^navigator.kind = 'nope' is unknown; use one of \['geometric'\]"):
+            make_navigator(NavigatorConfig(kind="nope"), None, None)  # type: ignore[arg-type]

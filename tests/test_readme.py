@@ -14,7 +14,9 @@ The venv must be this checkout's (`make install`). Three documented departures k
 - `python benchmarks/X.py OUT` lines run this checkout's scripts from a copy of `benchmarks/` in the temp
   folder, so their JSON never overwrites the committed results.
 
-A Python block preceded by "Save the class below as `X.py`" is also written to `X.py`.
+A Python block preceded by "Save the class below as `X.py`" is also written to `X.py`, and is run as a
+module rather than as `__main__` (its main guard may start a server that a later block uses). `python` and
+`ovon` on PATH are the venv's (this interpreter's).
 """
 
 from __future__ import annotations
@@ -109,6 +111,9 @@ def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: 
         script = cwd / "_block.py"
         script.write_text(code)
         cmd = ["python", str(script)]  # the `python` on the newcomer's PATH (the venv's)
+        if saved:
+            cmd = ["python", "-c", "import runpy, sys; runpy.run_path(sys.argv[1], run_name='readme_block')",
+                   str(script)]
     elif lang in ("shell", "bash", "sh", "console"):
         script = cwd / "_block.sh"
         script.write_text(_shell(code))

@@ -1,4 +1,4 @@
-"""Metrics and failure labels against hand-computed trajectories (task.md)."""
+"""Metrics and failure labels against hand-computed trajectories (docs/spec.md#metrics, #failure-labels)."""
 
 import math
 
@@ -129,6 +129,33 @@ def test_stop_wrong_object():
 def test_stop_near_unseen_distractor_is_not_wrong_object():
     box = Distractor(OTHER, "toaster", np.array([0.8, 0.0, -0.2]), np.array([1.2, 0.5, 0.2]))
     assert labelled([0.5, 1.0], stop=True, frames=[frame(), frame()], distractors=[box]) == "stop_never_saw_goal"
+
+
+def test_distractor_seen_earlier_but_not_in_view_at_stop_is_not_wrong_object():
+    """The label needs the other object in the STOP frame: a glimpse earlier on does not count."""
+    box = Distractor(OTHER, "toaster", np.array([0.8, 0.0, -0.2]), np.array([1.2, 0.5, 0.2]))
+    seen_then = [frame({OTHER: 0.2, GOAL: 0.05}), frame({GOAL: 0.05})]
+    assert labelled([0.5, 1.0], stop=True, frames=seen_then, distractors=[box]) == "stop_too_far"
+    never_goal = [frame({OTHER: 0.2}), frame()]
+    assert labelled([0.5, 1.0], stop=True, frames=never_goal, distractors=[box]) == "stop_never_saw_goal"
+
+
+def test_distractor_in_view_below_seen_threshold_is_not_wrong_object():
+    box = Distractor(OTHER, "toaster", np.array([0.8, 0.0, -0.2]), np.array([1.2, 0.5, 0.2]))
+    f = [frame({GOAL: 0.05}), frame({OTHER: 0.005})]
+    assert labelled([0.5, 1.0], stop=True, frames=f, distractors=[box]) == "stop_too_far"
+
+
+def test_distractor_in_view_but_farther_than_one_metre_is_not_wrong_object():
+    box = Distractor(OTHER, "toaster", np.array([2.2, 0.0, -0.2]), np.array([2.6, 0.5, 0.2]))  # 1.2 m away
+    f = frame({OTHER: 0.2, GOAL: 0.05})
+    assert labelled([0.5, 1.0], stop=True, frames=[f, f], distractors=[box]) == "stop_too_far"
+
+
+def test_near_miss_after_seeing_the_goal_is_stop_too_far():
+    """STOP 0.3 m outside the success region with the goal in view (VLFM's typical miss)."""
+    f = frame({GOAL: 0.3})
+    assert labelled([1.0, 2.0, 2.7], stop=True, frames=[f] * 3) == "stop_too_far"
 
 
 def test_stop_too_far():

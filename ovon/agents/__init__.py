@@ -10,7 +10,7 @@ from __future__ import annotations
 import inspect
 
 from ovon.agents.base import Agent, is_privileged
-from ovon.plugins import PluginError, is_spec, load_object
+from ovon.plugins import PluginError, load_object, lookup
 
 BUILTIN: dict[str, str] = {
     "random": "ovon.agents.random_agent:RandomAgent",
@@ -30,8 +30,8 @@ class AgentError(ValueError):
 
 def load_agent_class(name: str) -> type:
     fix = _FIX.format(builtin=sorted(BUILTIN))
-    target = BUILTIN.get(name, name)
-    if not is_spec(target):
+    target = lookup(name, BUILTIN)
+    if target is None:
         raise AgentError(f"unknown agent {name!r}; {fix}")
     try:
         obj = load_object(target)
@@ -84,6 +84,15 @@ def check_agent(name: str, kwargs: dict | None = None) -> None:
 
 
 def make_agent(name: str, **kwargs) -> Agent:
+    """The agent `name` built with `kwargs`; for `remote:HOST:PORT` a connected `RemoteAgent`, `kwargs` being
+    `RemoteConfig` fields (timeout_s, batch, allow_privileged)."""
+    from ovon.agents.remote import is_remote
+
+    if is_remote(name):
+        from ovon.agents.remote import RemoteAgent, RemoteConfig
+        from ovon.config.base import from_dict
+
+        return RemoteAgent(name, from_dict(RemoteConfig, kwargs))
     agent = load_agent_class(name)(**kwargs)
     if not isinstance(agent, Agent):
         raise AgentError(f"agent {name!r} must define reset(episode_info) and act(observation)")

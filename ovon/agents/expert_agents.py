@@ -12,6 +12,8 @@ from ovon.experts.rig import Embodiment
 
 class _ExpertAgent:
     privileged = True
+    servable = False  # `ovon serve`: the navigation grid they plan on does not travel
+    servable_reason = "it plans on the navigation grid, which the remote protocol does not carry"
 
     def __init__(self, name: str, cfg) -> None:
         self.name, self.cfg = name, cfg

@@ -24,8 +24,8 @@ from ovon.config.base import (
     non_empty,
     positive,
 )
-from ovon.dataset.io import SPLIT_NAME_PATTERN
-from ovon.dataset.splits import EPISODE_SPLITS as _SPLITS
+from ovon.dataset.io import HELD_OUT_SPLITS, SPLIT_NAME_PATTERN
+from ovon.dataset.io import SPLITS as _SPLITS
 from ovon.dataset.splits import SplitConfig
 
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
@@ -105,13 +105,19 @@ def register(sub) -> None:
     v.set_defaults(func=cmd_validate)
 
 
-def cmd_generate(args) -> int:
+def generation_config(args):
+    """The `GenerationConfig` of a `dataset generate` command line: the preset, `--config`, `--set`."""
     from ovon.config.base import build
     from ovon.config.dataset import GENERATION_PRESETS, GenerationConfig
+
+    return build(GenerationConfig, GENERATION_PRESETS[args.preset](), args.config or None, args.set)
+
+
+def cmd_generate(args) -> int:
     from ovon.dataset.generate import generate
 
     a = from_args(GenerateArgs, args, split=tuple(args.split) if args.split else None)
-    cfg = build(GenerationConfig, GENERATION_PRESETS[args.preset](), a.config or None, args.set)
+    cfg = generation_config(args)
     rep = generate(a.scenes, args.out, cfg, splits=a.split, workers=a.workers, executor=a.executor,
                    progress=not args.no_progress, category_split_path=a.categories or None)
     n = sum(rep.episodes.values())
@@ -148,7 +154,7 @@ def cmd_splits(args) -> int:
     cs = split_categories(cats, SplitConfig(seed=a.seed, holdout_fraction=a.holdout,
                                             similarity_threshold=a.threshold))
     cs.save(a.out)
-    for name in ("val_seen_synonyms", "val_unseen"):
+    for name in HELD_OUT_SPLITS:
         rng = cs.similarity_range(name)
         print(f"{name}: {len(cs.categories(name))} categories"
               + (f", similarity [{rng[0]:.2f}, {rng[1]:.2f}]" if rng else ""))

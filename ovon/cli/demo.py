@@ -12,6 +12,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from ovon.dataset.io import VAL_SPLITS
+
 AGENTS = ("random", "shortest-path", "frontier", "vlfm")
 STOCHASTIC = ("random",)  # the demo runs without noise: every other agent is deterministic
 
@@ -40,7 +42,7 @@ def cmd_demo(args) -> int:
             return rc
     gen = ["dataset", "generate", "--scenes", str(scenes), "--out", str(data), "--preset", "fast",
            "--workers", str(args.workers), "--set", f"episodes_per_val_split={max(args.episodes, 30)}"]
-    for s in ("val_seen", "val_seen_synonyms", "val_unseen"):
+    for s in VAL_SPLITS:
         gen += ["--split", s]
     rc = ovon(gen)
     if rc:

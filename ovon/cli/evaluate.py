@@ -11,6 +11,7 @@ import yaml
 
 from ovon.config.base import ExistingDir, existing_dir, from_args, in_range, non_empty, non_negative, validate
 from ovon.config.sim import SimConfig
+from ovon.dataset.io import VAL_SPLITS
 from ovon.evaluate.harness import EvalConfig, apply_overrides, parse_noise
 
 
@@ -21,16 +22,18 @@ def _csv(s: str) -> list[str]:
 def register(sub) -> None:
     p = sub.add_parser("evaluate", help="run an agent over val splits and seeds; resumable")
     p.add_argument("--agent", required=True,
-                   help="random | shortest-path | frontier | policy | vlfm | dagrl-od | pkg.module:Class")
+                   help="random | shortest-path | frontier | policy | vlfm | dagrl-od | pkg.module:Class | "
+                        "remote:HOST:PORT (an agent served by `ovon serve` or ovon_agent.serve)")
     p.add_argument("--agent-arg", action="append", default=[], metavar="KEY=VALUE",
                    help="keyword argument for the agent's constructor (repeatable)")
     p.add_argument("--checkpoint", help="policy checkpoint (for --agent policy and dagrl-od)")
     p.add_argument("--data", required=True, help="episode dataset root (holds val_seen/ ...)")
     p.add_argument("--scenes", required=True, help="scene-datasets root or the scene dataset folder")
-    p.add_argument("--splits", default="val_seen,val_seen_synonyms,val_unseen")
+    p.add_argument("--splits", default=",".join(VAL_SPLITS))
     p.add_argument("--seeds", default="0", help="comma-separated, e.g. 0,1,2")
     p.add_argument("--episodes", default=None, help="episodes per split (default: all)")
-    p.add_argument("--noise", default="", help="e.g. actuation,odometry or actuation:movebase*0.5")
+    p.add_argument("--noise", default="", help="e.g. actuation,odometry, actuation:movebase*0.5 or odometry:drift "
+                   "(default odometry: bounded per reading)")
     p.add_argument("--preset", choices=["auto", "cpu", "paper"], default="auto",
                    help="cpu: 160x120 frames; paper: the 360x640 Stretch camera; auto: the camera a policy "
                         "checkpoint was trained with, else cpu")

@@ -14,7 +14,7 @@ import os
 import sys
 import warnings
 
-GROUPS = ["scenes", "sim", "dataset", "evaluate", "train", "demo", "experiment"]
+GROUPS = ["scenes", "sim", "dataset", "evaluate", "serve", "train", "demo", "experiment"]
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -51,8 +51,10 @@ def expected_errors() -> tuple[type[BaseException], ...]:
     from ovon.config.base import ConfigError
     from ovon.parallel import WorkerDied
 
-    return (ConfigError, ValueError, KeyError, FileNotFoundError, NotADirectoryError, IsADirectoryError,
-            PermissionError, WorkerDied)
+    errors: tuple[type[BaseException], ...] = (ConfigError, ValueError, KeyError, FileNotFoundError,
+                                               NotADirectoryError, IsADirectoryError, PermissionError, WorkerDied)
+    remote = sys.modules.get("ovon_agent")  # a served agent that failed, hung or went away (its own line)
+    return errors + ((remote.RemoteError,) if remote is not None else ())
 
 
 def main(argv: list[str] | None = None) -> int:

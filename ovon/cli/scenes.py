@@ -112,16 +112,61 @@ def cmd_generate(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     from ovon.scenes.hm3dsem import load_scene
-    from ovon.scenes.inspect import navigation_summary, print_summary, summarize
+    from ovon.scenes.inspect import print_summary, summarize
 
+    if str(args.path).lower().endswith(".navmesh"):
+        return _inspect_navmesh(args)
     scene = load_scene(args.path, up=args.up)
     summary = summarize(scene)
     if args.nav:
-        summary["navigation"] = navigation_summary(scene)
+        from ovon.config.dataset import StartConfig
+        from ovon.sim.navsummary import navigation_summary
+
+        summary["navigation"] = navigation_summary(scene, StartConfig().min_island_radius)
     if args.json:
         print(json.dumps(summary, indent=1))
     else:
         print_summary(summary)
+    return 0
+
+
+def _inspect_navmesh(args: argparse.Namespace) -> int:
+    """`ovon scenes inspect X.navmesh`: habitat's navigable area and islands, and with --nav ovon's grids."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from ovon.sim.navmesh import navmesh_summary
+
+    if args.up is not None:
+        raise ValueError(f"{args.path}: a navmesh is in habitat's frame (y up) already; drop --up")
+    s = navmesh_summary(args.path, grids=args.nav)
+    if args.json:
+        print(json.dumps(s, indent=1))
+        return 0
+    console = Console()
+    over = Table(title=f"Navmesh {Path(args.path).name}", show_header=False)
+    over.add_column("key", style="bold")
+    over.add_column("value")
+    over.add_row("format", f"habitat navmesh version {s['version']}, {s['tiles']} tile(s), {s['polygons']} polygons "
+                           f"({s['walkable_polygons']} walkable)")
+    settings = s["settings"]
+    over.add_row("baked for", f"agent radius {s['agent_radius']:.3f} m" + (
+        f", height {settings['agent_height']:.2f} m, max climb {settings['agent_max_climb']:.2f} m, max slope "
+        f"{settings['agent_max_slope']:.0f} deg, cell {settings['cell_size']:.3f} m" if settings
+        else " (version 1: no NavMeshSettings stored)"))
+    over.add_row("bounds", f"{s['bounds_min']} .. {s['bounds_max']}")
+    over.add_row("navigable area", f"{s['navigable_area_m2']:.3f} m² (3D area of the walkable detail triangles)")
+    over.add_row("islands", str(s["num_islands"]))
+    for g in s.get("grid", []):
+        over.add_row(f"ovon grid floor {g['floor']}", f"{g['navigable_m2']:.2f} m² at y={g['height']:.2f} in "
+                     f"{g['islands']} islands ({g['cell_size']:.3f} m cells)")
+    console.print(over)
+    isl = Table(title=f"Islands (largest first{', first 50' if s['num_islands'] > 50 else ''})")
+    for col in ("island", "area m²", "radius m"):
+        isl.add_column(col, justify="right")
+    for i in s["islands"]:
+        isl.add_row(str(i["island"]), f"{i['area_m2']:.3f}", f"{i['radius_m']:.3f}")
+    console.print(isl)
     return 0
 
 
@@ -196,10 +241,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--workers", type=int, default=None, help="worker processes (default: min(2, cpus))")
     g.set_defaults(func=cmd_generate)
 
-    i = sub.add_parser("inspect", help="print a summary of one scene (folder or any of its files)")
+    i = sub.add_parser("inspect", help="print a summary of one scene (folder or any of its files) or of a habitat "
+                                       "navmesh (X.navmesh: navigable area and islands as habitat computes them)")
     i.add_argument("path")
     i.add_argument("--json", action="store_true", help="print the summary as JSON")
-    i.add_argument("--nav", action="store_true", help="also build navigability: area, islands per floor")
+    i.add_argument("--nav", action="store_true", help="also build navigability: area, islands per floor (from the "
+                   "navmesh beside the mesh when there is one, see sim.nav.source)")
     add_up_argument(i)
     i.set_defaults(func=cmd_inspect)
 

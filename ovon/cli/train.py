@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
-
-from ovon.atomic import atomic_write_text
 
 
 def register(sub) -> None:
@@ -34,94 +31,27 @@ def register(sub) -> None:
 
 
 def build_config(args):
-    from ovon.config.base import build
-    from ovon.train.config import train_preset
+    """The TrainConfig of these options (`ovon.train.config.build_config`; imported lazily: `ovon --help`
+    should not pay for the training stack)."""
+    from ovon.train.config import build_config as build
 
-    changes: dict = {"algo": args.algo}
-    if args.expert:
-        changes["expert"] = args.expert
-    preset = train_preset(args.preset, **changes)
-    if args.policy:
-        preset = dataclasses.replace(preset, policy=dataclasses.replace(preset.policy, core=args.policy))
-    if args.encoder:
-        preset = dataclasses.replace(preset, encoder=dataclasses.replace(preset.encoder, image=args.encoder))
-    return build(type(preset), preset, args.config, args.set)
-
-
-def episode_list(args):
-    if args.procedural:
-        from ovon.train.episodes import adhoc_specs, parse_seed_list
-
-        specs = adhoc_specs(parse_seed_list(args.procedural))
-        return specs[: args.episodes] if args.episodes else specs
-    if args.data:
-        if not args.scenes:
-            raise ValueError("--data needs --scenes")
-        from ovon.evaluate.harness import load_specs
-
-        specs = load_specs(args.data, args.scenes, args.split, args.episodes)
-        if not specs:
-            raise ValueError(f"split {args.split!r} in {args.data} has no episodes")
-        return specs
-    return None
-
-
-# May differ between a run and its resume: where and how fast it runs, and the budget (to train longer),
-# not what it learns from or how.
-MAY_CHANGE = ("max_updates", "total_steps", "env_workers", "checkpoint_every", "threads", "rollout_threads",
-              "device", "progress", "log_every", "keep_checkpoints", "text_cache", "inputs.data.path",
-              "inputs.scenes.path")
-
-
-def run_identity(args, cfg) -> tuple[dict, dict]:
-    """What a training run folder is: the resolved config, the algorithm, and what it reads (episodes by
-    content, the init policy by hash), so `--resume` with anything else is refused with the differences."""
-    from ovon.config.base import to_dict
-    from ovon.runfolder import file_sha256, path_identity
-
-    config = {**to_dict(cfg), "cli": {"split": args.split, "episodes": args.episodes,
-                                      "procedural": args.procedural or ""}}
-    inputs: dict = {}
-    if args.data:
-        from ovon.dataset.io import EpisodeDataset
-
-        inputs["data"] = {"path": path_identity(args.data),
-                          "split": EpisodeDataset(args.data, args.split).fingerprint()}
-        inputs["scenes"] = {"path": path_identity(args.scenes)}
-    if args.init:
-        p = Path(args.init) / "policy.pt" if Path(args.init).is_dir() else Path(args.init)
-        inputs["init"] = {"sha256": file_sha256(p) if p.is_file() else str(p)}
-    return config, inputs
+    return build(args)
 
 
 def cmd_train(args) -> int:
     import os
 
-    from ovon.config.base import to_dict
-    from ovon.runfolder import RunFolder
-    from ovon.train import train
-    from ovon.train.distributed import launched_by_torchrun
+    from ovon.train import EpisodeSource, train
+    from ovon.train.distributed import cleanup, launched_by_torchrun
 
     cfg = build_config(args)
     out = Path(args.out)
-    rank0 = int(os.environ.get("RANK", "0")) == 0
-    specs = episode_list(args)
-    folder = None
-    if rank0:  # one writer: rank 0 holds the folder's lock for the whole run (other ranks write nothing)
-        config, inputs = run_identity(args, cfg)
-        folder = RunFolder.open(out, "train", config, inputs, resume=args.resume, may_change=MAY_CHANGE,
-                                markers=("checkpoint.pt", "policy.pt"))
-        atomic_write_text(out / "config.json", json.dumps(to_dict(cfg), indent=1, default=str))
-    try:
-        last = train(cfg, specs, out, resume=args.resume, init=args.init)
-    finally:
-        if folder is not None:
-            folder.close()
-    if rank0:
+    source = EpisodeSource(data=args.data, scenes=args.scenes, split=args.split, limit=args.episodes,
+                           procedural=args.procedural)
+    last = train(cfg, source, out, resume=args.resume, init=args.init)  # opens, checks and locks --out
+    if int(os.environ.get("RANK", "0")) == 0:
         shown = {k: round(v, 4) for k, v in last.items() if isinstance(v, float)}
         print(json.dumps(shown))
         print(f"policy: {out / 'policy.pt'}" + (" (torchrun)" if launched_by_torchrun() else ""))
-    from ovon.train.distributed import cleanup
-
     cleanup()
     return 0

@@ -1,4 +1,4 @@
-"""Simulator configs: the Stretch embodiment of task.md and the navigability grid.
+"""Simulator configs: the Stretch embodiment (docs/spec.md#agent) and the navigability grid.
 
 Every field has a declared domain (`ovon.config.base`); the bounds are what the simulator can run
 (a 0-wide camera, a 0 m step or a 180 deg field of view are refused before any work)."""
@@ -52,6 +52,9 @@ class NavConfig:
     cell_height: float = in_range(0.05, 0.01, 1.0)
     max_slope_deg: float = in_range(30.0, 0.0, 90.0, hi_open=True)
     floor_separation: float = positive(1.0)  # walkable surfaces more than this apart in y are separate floors
+    # Where navigability comes from: the habitat navmesh beside the mesh (<id>.navmesh or <id>.basis.navmesh),
+    # the mesh itself, or auto = the navmesh when the scene has one.
+    source: Literal["auto", "navmesh", "mesh"] = "auto"
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,8 @@ class NoiseConfig:
     actuation: Literal["none", "gaussian", "ilqr", "proportional", "movebase"] = "none"
     actuation_multiplier: float = in_range(1.0, 0.0, 100.0)
     odometry: bool = False
+    # bounded: a fresh error on each reading (the paper); drift: errors integrated by dead reckoning
+    odometry_mode: Literal["bounded", "drift"] = "bounded"
     odometry_position_m: float = non_negative(0.007)
     odometry_heading_deg: float = non_negative(2.0)
 

@@ -1,4 +1,4 @@
-"""Task configs: episode length, success, the failure-analysis thresholds and the RL rewards (task.md)."""
+"""Task configs: episode length, success, the failure-analysis thresholds and the RL rewards (docs/spec.md#task)."""
 
 from __future__ import annotations
 

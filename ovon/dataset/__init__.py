@@ -1,8 +1,10 @@
 """Episode datasets: records, lazy reading / atomic writing of the released layout, category splits."""
 
 from ovon.dataset.io import (
+    HELD_OUT_SPLITS,
     SPLIT_ALIASES,
     SPLITS,
+    VAL_SPLITS,
     EpisodeDataset,
     SceneEpisodes,
     goals_for,
@@ -25,7 +27,9 @@ from ovon.dataset.records import (
 )
 
 __all__ = [
+    "HELD_OUT_SPLITS",
     "SPLITS",
+    "VAL_SPLITS",
     "SPLIT_ALIASES",
     "DatasetError",
     "Episode",

@@ -33,12 +33,9 @@ from ovon.config.base import from_dict, to_dict
 from ovon.config.dataset import GenerationConfig
 from ovon.config.sim import AgentConfig, CameraConfig, NavConfig
 from ovon.dataset.generation_folder import EmptyGenerationError, generation_run_folder
-from ovon.dataset.io import shard_exists, write_scene_shard, write_split_shell
+from ovon.dataset.io import SPLITS, shard_exists, write_scene_shard, write_split_shell
 from ovon.dataset.records import Episode, ObjectGoal, ViewPoint, goal_key
 from ovon.geometry import quat_to_yaw, yaw_to_quat
-
-VAL_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
-ALL_SPLITS = ("train", *VAL_SPLITS)
 
 
 @dataclass
@@ -101,15 +98,17 @@ def _r(v, nd: int) -> list[float]:
 
 
 # -- phase 1: goals of one scene ----------------------------------------------------------------
-def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str]) -> dict:
-    """{category: [goal dict]} for the scene plus the reasons objects were not goals."""
+def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str],
+                  nav_cache: Path | None = None) -> dict:
+    """{category: [goal dict]} for the scene plus the reasons objects were not goals (`nav_cache`: the
+    folder of the on-disk navigation-grid cache, shared with phase 2)."""
     from ovon.dataset.viewpoints import object_viewpoints
     from ovon.sim.navgrid import build_navigation
     from ovon.sim.render import make_renderer
     from ovon.sim.world import load_scene_any
 
     scene = load_scene_any(ref.folder)
-    nav = build_navigation(scene, AgentConfig(), NavConfig())
+    nav = build_navigation(scene, AgentConfig(), NavConfig(), cache_dir=nav_cache)
     vc = cfg.viewpoints
     cam = CameraConfig(width=vc.render_size, height=vc.render_size, hfov_deg=vc.hfov_deg,
                        camera_height=vc.camera_height, backend=vc.backend)  # type: ignore[arg-type]
@@ -170,9 +169,8 @@ def goals_job(job: dict) -> dict:
     path = _goal_cache_path(out, ref)
     if path.exists():
         return {"stem": ref.stem, "cached": True}
-    _nav_cache(out)
     t0 = time.perf_counter()
-    res = compute_goals(ref, from_dict(GenerationConfig, job["cfg"]), job["categories"])
+    res = compute_goals(ref, from_dict(GenerationConfig, job["cfg"]), job["categories"], _nav_cache(out))
     res["seconds"] = round(time.perf_counter() - t0, 3)
     write_json_gz(path, res)
     return {"stem": ref.stem, "cached": False, "seconds": res["seconds"]}
@@ -183,10 +181,9 @@ def load_goal_cache(out: Path, ref: SceneRef) -> dict:
         return json.load(f)
 
 
-def _nav_cache(out: Path) -> None:
-    import os
-
-    os.environ.setdefault("OVON_CACHE_DIR", str(out / ".cache" / "nav"))
+def _nav_cache(out: Path) -> Path:
+    """Where both phases keep the scenes' navigation grids (computed once per scene, kept for a resume)."""
+    return out / ".cache" / "nav"
 
 
 # -- phase 2: episodes of one scene and split ----------------------------------------------------
@@ -201,7 +198,6 @@ def episodes_job(job: dict) -> dict:
     out, split = Path(job["out"]), job["split"]
     if shard_exists(out, split, ref.stem):
         return {"stem": ref.stem, "split": split, "cached": True}
-    _nav_cache(out)
     cfg = from_dict(GenerationConfig, job["cfg"])
     goals: dict[str, list[dict]] = load_goal_cache(out, ref)["goals"]
     alloc: dict[str, int] = job["allocation"]
@@ -213,7 +209,7 @@ def episodes_job(job: dict) -> dict:
     used: set[str] = set()
     nav = None
     if any(alloc.values()):
-        nav = build_navigation(load_scene_any(ref.folder), AgentConfig(), NavConfig())
+        nav = build_navigation(load_scene_any(ref.folder), AgentConfig(), NavConfig(), cache_dir=_nav_cache(out))
     # Round-robin over categories so a truncated list still covers all of them.
     queue = {c: n for c, n in sorted(alloc.items()) if n > 0}
     per_cat: dict[str, tuple] = {}
@@ -362,7 +358,7 @@ def generate(
     scenes_dir: str | Path,
     out: str | Path,
     cfg: GenerationConfig,
-    splits: tuple[str, ...] = ALL_SPLITS,
+    splits: tuple[str, ...] = SPLITS,
     workers: int = 1,
     executor: str = "process",
     progress: bool = True,
@@ -373,9 +369,9 @@ def generate(
     from ovon.parallel import progress_bar, run_jobs
     from ovon.scenes.vocabulary import load_vocabulary
 
-    bad = [s for s in splits if s not in ALL_SPLITS]
+    bad = [s for s in splits if s not in SPLITS]
     if bad:
-        raise ValueError(f"unknown split(s) {bad}; choose from {list(ALL_SPLITS)}")
+        raise ValueError(f"unknown split(s) {bad}; choose from {list(SPLITS)}")
     t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -404,7 +400,7 @@ def generate(
         csplit.save(cat_path)
     if cat_path != out / "categories.json":
         csplit.save(out / "categories.json")
-    split_cats = {s: csplit.categories(s) for s in ALL_SPLITS}
+    split_cats = {s: csplit.categories(s) for s in SPLITS}
     vocab, enc = load_vocabulary(), default_text_encoder()
     children = {
         s: (children_map(split_cats[s], vocab, enc, cfg.splits.children_threshold) if cfg.splits.children else {})

@@ -20,7 +20,11 @@ from typing import Any
 from ovon.atomic import write_json_gz
 from ovon.dataset.records import DatasetError, Episode, ObjectGoal, goal_key
 
+# The split names, defined here only: the HM3D-OVON episode splits in the paper's order, the evaluation
+# splits (the columns of its tables) and those whose goal categories training never sees.
 SPLITS: tuple[str, ...] = ("train", "val_seen", "val_seen_synonyms", "val_unseen")
+VAL_SPLITS: tuple[str, ...] = SPLITS[1:]
+HELD_OUT_SPLITS: tuple[str, ...] = SPLITS[2:]
 # Upstream generation code names the two unseen-category splits differently; accept both.
 SPLIT_ALIASES: dict[str, str] = {
     "val_unseen_easy": "val_seen_synonyms",

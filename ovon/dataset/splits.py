@@ -19,20 +19,18 @@ import numpy as np
 
 from ovon.atomic import write_json
 from ovon.config.base import in_range, non_empty, validate
-from ovon.dataset.io import SPLIT_ALIASES
+from ovon.dataset.io import HELD_OUT_SPLITS, SPLIT_ALIASES, SPLITS
 from ovon.dataset.records import DatasetError
 from ovon.models.text_minilm import MODEL_NAME, TextEncoder
-
-EPISODE_SPLITS = ("train", "val_seen", "val_seen_synonyms", "val_unseen")
 
 
 def canonical_split(split: str) -> str:
     """Our split name for either naming (val_unseen_easy -> val_seen_synonyms, ...)."""
-    if split in EPISODE_SPLITS:
+    if split in SPLITS:
         return split
     if split in SPLIT_ALIASES:
         return SPLIT_ALIASES[split]
-    raise ValueError(f"unknown split {split!r}; valid: {', '.join(EPISODE_SPLITS)} (or val_unseen_easy/hard)")
+    raise ValueError(f"unknown split {split!r}; valid: {', '.join(SPLITS)} (or val_unseen_easy/hard)")
 
 
 @dataclass
@@ -71,7 +69,7 @@ class CategorySplit:
     def categories(self, split: str) -> list[str]:
         """Goal categories of an episode split (train and val_seen share the train categories)."""
         name = canonical_split(split)
-        if name in ("train", "val_seen"):
+        if name not in HELD_OUT_SPLITS:
             return list(self.train)
         return [h.category for h in self.held_out(name)]
 
@@ -107,7 +105,7 @@ class CategorySplit:
                     HeldOutCategory(str(h["category"]), float(h["max_similarity"]), str(h["nearest_train_category"]))
                     for h in doc[k]
                 ]
-                for k in ("val_seen_synonyms", "val_unseen")
+                for k in HELD_OUT_SPLITS
             }
             return cls(
                 train=[str(c) for c in doc["train"]],

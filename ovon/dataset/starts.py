@@ -1,4 +1,4 @@
-"""Start poses (dataset.md, "Starts"): every rejection is counted by reason so a thin dataset explains
+"""Start poses (docs/spec.md#starts): every rejection is counted by reason so a thin dataset explains
 itself."""
 
 from __future__ import annotations

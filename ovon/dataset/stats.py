@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ovon.dataset.io import EpisodeDataset
+from ovon.dataset.io import HELD_OUT_SPLITS, EpisodeDataset
 from ovon.dataset.records import DatasetError
 from ovon.dataset.splits import load_category_split
 
@@ -75,7 +75,7 @@ def dataset_stats(root: str | Path) -> dict:
     cat_file = root / "categories.json"
     if cat_file.exists():
         split = load_category_split(cat_file)
-        for s in ("val_seen_synonyms", "val_unseen"):
+        for s in HELD_OUT_SPLITS:
             rng = split.similarity_range(s)
             if rng:
                 out.setdefault("category_split", {})[s] = {

@@ -3,7 +3,7 @@
 Why one module: the checks a reader needs before it runs an episode (unique ids, finite numbers, unit
 pure-yaw start rotations, goals with viewpoints, a non-empty category, a start on the navigable map)
 are the ones `validate` reports. Readers skip a bad episode with a counted warning; `validate` lists it
-and fails. Independent of the generator's code, `validate` also checks dataset.md's constraints:
+and fails. Independent of the generator's code, `validate` also checks the constraints of docs/spec.md#generation:
 viewpoint ordering and scores, and that every start is on the goals' floor, within the geodesic limits
 of a goal viewpoint, along a single-floor path.
 """

@@ -1,4 +1,4 @@
-"""Goal objects and their viewpoints (dataset.md, "Goal objects" and "Viewpoints").
+"""Goal objects and their viewpoints (docs/spec.md#generation, #viewpoints).
 
 Candidates lie on a `grid_step` lattice over the object's footprint padded by `max_distance`; a
 candidate is kept when it is navigable on the object's floor and within `max_distance` (measured on

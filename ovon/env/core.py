@@ -83,7 +83,7 @@ class ObjectNavEnv(gym.Env):
         self._world: World | None = None
         self._actuation = ActuationNoise.from_name(sim.noise.actuation, sim.noise.actuation_multiplier)
         odo = OdometryNoise(sim.noise.odometry_position_m, sim.noise.odometry_heading_deg)
-        self._odometry = Odometry(odo if sim.noise.odometry else None)
+        self._odometry = Odometry(odo if sim.noise.odometry else None, sim.noise.odometry_mode)
         self.observation_space = spaces.Dict(observation_spaces(sim))
         self.action_space = spaces.Discrete(6)
         self.spec_episode: EpisodeSpec | None = None
@@ -203,7 +203,7 @@ def observation_spaces(sim: SimConfig) -> dict[str, spaces.Space]:
             np.float32,
         ),
         "goal": spaces.Text(MAX_GOAL_LEN, min_length=1, charset=GOAL_CHARSET),
-        # 1 when the step that led here was blocked (a bump sensor; task.md reports it each step)
+        # 1 when the step that led here was blocked (a bump sensor; docs/spec.md#observations)
         "collided": spaces.Discrete(2),
     }
     if cam.rgb:

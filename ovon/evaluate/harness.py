@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from ovon.agents.remote import RemoteConfig
 from ovon.atomic import atomic_write_text
 from ovon.config.base import (
     ExistingDir,
@@ -33,7 +34,7 @@ from ovon.config.base import (
 )
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
-from ovon.dataset.io import SPLIT_NAME_PATTERN
+from ovon.dataset.io import SPLIT_NAME_PATTERN, VAL_SPLITS
 from ovon.evaluate.results import (
     RecordWriter,
     coverage_lines,
@@ -46,12 +47,11 @@ from ovon.evaluate.results import (
 from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
-DEFAULT_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
 MAY_CHANGE = ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "chunk", "name",
-              "agent_kwargs.checkpoint", "strict")
+              "agent_kwargs.checkpoint", "remote.timeout_s", "remote.batch", "remote.allow_privileged", "strict")
 
 
 @dataclass
@@ -60,7 +60,7 @@ class EvalConfig:
     agent_kwargs: dict = field(default_factory=dict)
     data: str = constrained("data/datasets/ovon", ExistingDir(), flag="--data")
     scenes: str = constrained("data/scene_datasets", ExistingDir(), flag="--scenes")
-    splits: tuple[str, ...] = non_empty(DEFAULT_SPLITS, each=SPLIT_NAME, distinct=True, flag="--splits")
+    splits: tuple[str, ...] = non_empty(VAL_SPLITS, each=SPLIT_NAME, distinct=True, flag="--splits")
     seeds: tuple[int, ...] = non_empty((0,), each=NonNegative(), distinct=True, flag="--seeds")
     episodes: int | None = positive(None, flag="--episodes")  # per split; None = all
     workers: int = in_range(1, 1, 1024, flag="--workers")
@@ -68,18 +68,21 @@ class EvalConfig:
     chunk: int = in_range(4, 1, 100_000)  # episodes per work unit (same scene)
     sim: SimConfig = field(default_factory=lambda: SimConfig(camera=CameraConfig(width=160, height=120)))
     task: TaskConfig = field(default_factory=TaskConfig)
-    name: str | None = non_empty(None, flag="--name")  # row name in tables; default = agent
+    name: str | None = non_empty(None, flag="--name")  # row name in tables; default = agent (its own name if remote)
+    remote: RemoteConfig = field(default_factory=RemoteConfig)  # --agent remote:HOST:PORT only
     strict: bool = False  # refuse a split holding an invalid episode instead of skipping it (counted)
 
 
 def parse_noise(spec: str | None) -> NoiseConfig:
-    """`actuation,odometry`, `actuation:movebase`, `actuation:ilqr*2` (multiplier) or empty."""
+    """`actuation,odometry`, `actuation:movebase`, `actuation:ilqr*2` (multiplier), `odometry:drift`
+    (dead-reckoning drift instead of the paper's bounded per-reading error) or empty."""
     from ovon.config.base import ConfigError
 
     cfg = NoiseConfig()
     if not spec:
         return cfg
     models = typing.get_args(typing.get_type_hints(NoiseConfig)["actuation"])
+    odo_modes = typing.get_args(typing.get_type_hints(NoiseConfig)["odometry_mode"])
     fix = "fix: use e.g. --noise actuation,odometry or --noise actuation:movebase*0.5"
     for item in [s.strip() for s in spec.split(",") if s.strip()]:
         name, _, arg = item.partition(":")
@@ -95,11 +98,11 @@ def parse_noise(spec: str | None) -> NoiseConfig:
             cfg = dataclasses.replace(cfg, actuation=model, actuation_multiplier=k)
             if not 0 <= k <= 100:
                 raise ConfigError(f"--noise {item!r}: multiplier {k:g} is outside [0, 100]; {fix}")
-        elif name == "odometry" and not arg:
-            cfg = dataclasses.replace(cfg, odometry=True)
+        elif name == "odometry" and arg in ("",) + odo_modes:
+            cfg = dataclasses.replace(cfg, odometry=True, odometry_mode=arg or "bounded")
         else:
             raise ConfigError(f"--noise: unknown noise {item!r}, expected actuation[:ilqr|proportional|movebase|"
-                              f"gaussian][*k] or odometry; {fix}")
+                              f"gaussian][*k] or odometry[:bounded|drift]; {fix}")
     return validate(cfg, "sim.noise")
 
 
@@ -107,12 +110,11 @@ def apply_overrides(cfg: EvalConfig, overrides: list[str]) -> EvalConfig:
     from ovon.config.base import ConfigError
 
     data = parse_overrides(overrides)
-    sim = merge(cfg.sim, data.pop("sim"), "sim") if "sim" in data else cfg.sim
-    task = merge(cfg.task, data.pop("task"), "task") if "task" in data else cfg.task
+    groups = {g: merge(getattr(cfg, g), data.pop(g), g) for g in ("sim", "task", "remote") if g in data}
     if data:
-        raise ConfigError(f"unknown override group(s) {sorted(data)}; fix: --set takes sim.* or task.* keys here "
-                          "(e.g. --set task.max_steps=300); the other settings have their own options")
-    return dataclasses.replace(cfg, sim=sim, task=task)
+        raise ConfigError(f"unknown override group(s) {sorted(data)}; fix: --set takes sim.*, task.* or remote.* keys "
+                          "here (e.g. --set task.max_steps=300); the other settings have their own options")
+    return dataclasses.replace(cfg, **groups)
 
 
 @dataclass
@@ -222,36 +224,68 @@ def drop_off_map_starts(sel: SplitEpisodes, sim: SimConfig, workers: int = 1, ex
 _CACHE: dict = {}
 
 
+def _agent(unit: dict):
+    """The unit's agent, cached per process across chunks (a remote one keeps its connection)."""
+    from ovon.agents import make_agent
+    from ovon.agents.remote import is_remote
+
+    kwargs = unit["remote"] if is_remote(unit["agent"]) else unit["agent_kwargs"]
+    key = (unit["agent"], json.dumps(kwargs, sort_keys=True))
+    if _CACHE.get("agent_key") != key:
+        release_agent()
+        _CACHE["agent"] = make_agent(unit["agent"], **kwargs)
+        _CACHE["agent_key"] = key
+    return _CACHE["agent"]
+
+
+def release_agent() -> None:
+    """Drop the cached agent; a remote one closes its connection (the server frees its agents)."""
+    agent = _CACHE.pop("agent", None)
+    _CACHE.pop("agent_key", None)
+    if agent is not None and callable(getattr(agent, "close", None)):
+        agent.close()
+
+
 def run_unit(unit: dict) -> list[dict]:
-    """Runs a chunk of episodes of one scene; env and agent are cached per process across chunks."""
-    from ovon.agents import is_privileged, make_agent
+    """Runs a chunk of episodes of one scene; envs and agent are cached per process across chunks. A remote
+    agent runs `remote.batch` episodes in lockstep (one env each) and skips colour rendering when it does
+    not want RGB (frames are otherwise identical)."""
+    from ovon.agents import is_privileged
+    from ovon.agents.remote import is_remote
     from ovon.config.base import from_dict
     from ovon.env.stack import EnvRecipe, build_env
-    from ovon.evaluate.runner import run_episode
+    from ovon.evaluate.runner import run_episode, run_lockstep
 
     init_worker()
-    agent_key = (unit["agent"], json.dumps(unit["agent_kwargs"], sort_keys=True))
-    if _CACHE.get("agent_key") != agent_key:
-        _CACHE["agent"] = make_agent(unit["agent"], **unit["agent_kwargs"])
-        _CACHE["agent_key"] = agent_key
-    agent = _CACHE["agent"]
+    agent = _agent(unit)
     privileged = is_privileged(agent)
-    key = (json.dumps(unit["sim"], sort_keys=True), json.dumps(unit["task"], sort_keys=True), privileged)
+    remote = is_remote(unit["agent"])
+    sim = from_dict(SimConfig, unit["sim"])
+    if remote and "rgb" not in agent.observations:
+        sim = dataclasses.replace(sim, camera=dataclasses.replace(sim.camera, rgb=False))
+    n_envs = unit["remote"]["batch"] if remote else 1
+    key = (json.dumps(to_dict(sim), sort_keys=True), json.dumps(unit["task"], sort_keys=True), privileged)
     if _CACHE.get("env_key") != key:
-        if "env" in _CACHE:
-            _CACHE["env"].close()
-        recipe = EnvRecipe(sim=from_dict(SimConfig, unit["sim"]), task=from_dict(TaskConfig, unit["task"]),
-                           episodes=unit["specs"][:1], sample_episodes=False, privileged=privileged)
-        _CACHE["env"] = build_env(recipe)
+        for env in _CACHE.pop("envs", []):
+            env.close()
         _CACHE["env_key"] = key
-    env = _CACHE["env"]
-    return [run_episode(env, agent, spec, unit["seed"]) for spec in unit["specs"]]
+    recipe = EnvRecipe(sim=sim, task=from_dict(TaskConfig, unit["task"]), episodes=unit["specs"][:1],
+                       sample_episodes=False, privileged=privileged)
+    envs = _CACHE.setdefault("envs", [])
+    while len(envs) < min(n_envs, len(unit["specs"])):
+        envs.append(build_env(recipe))
+    if remote and n_envs > 1:
+        return run_lockstep(envs[:n_envs], agent, unit["specs"], unit["seed"])
+    return [run_episode(envs[0], agent, spec, unit["seed"]) for spec in unit["specs"]]
 
 
 # -- parent side ---------------------------------------------------------------------------------
 def _units(cfg: EvalConfig, specs_by_split: dict[str, list[EpisodeSpec]], done: set) -> list[dict]:
+    from ovon.agents.remote import is_remote
+
     units = []
-    sim, task = to_dict(cfg.sim), to_dict(cfg.task)
+    sim, task, remote = to_dict(cfg.sim), to_dict(cfg.task), to_dict(cfg.remote)
+    chunk = max(cfg.chunk, cfg.remote.batch) if is_remote(cfg.agent) else cfg.chunk  # a full batch per unit
     for seed in cfg.seeds:
         for split, specs in specs_by_split.items():
             by_scene: dict[str, list[EpisodeSpec]] = {}
@@ -259,13 +293,14 @@ def _units(cfg: EvalConfig, specs_by_split: dict[str, list[EpisodeSpec]], done: 
                 if (split, int(seed), s.scene, s.episode_id) not in done:
                     by_scene.setdefault(s.scene, []).append(s)
             for scene_specs in by_scene.values():
-                for i in range(0, len(scene_specs), cfg.chunk):
+                for i in range(0, len(scene_specs), chunk):
                     units.append(
                         {
-                            "specs": scene_specs[i : i + cfg.chunk],
+                            "specs": scene_specs[i : i + chunk],
                             "seed": int(seed),
                             "agent": cfg.agent,
                             "agent_kwargs": cfg.agent_kwargs,
+                            "remote": remote,
                             "sim": sim,
                             "task": task,
                         }
@@ -292,16 +327,22 @@ def run_inputs(cfg: EvalConfig) -> dict:
     return inputs
 
 
-def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> dict[str, SplitEpisodes]:
+def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> tuple[dict[str, SplitEpisodes], str]:
     """Everything that can refuse a run, before any episode: config domains, the agent, the episodes
     (invalid ones and starts off the map skipped with one counted warning per split, or refused with
-    `cfg.strict`)."""
+    `cfg.strict`); and the row name: `--name`, else the name a remote agent introduces itself with, else
+    `--agent`."""
     from ovon.agents import check_agent
+    from ovon.agents.remote import check_remote, is_remote
     from ovon.dataset.records import DatasetError
     from ovon.dataset.validate import warn_skipped
 
     validate(cfg)
-    check_agent(cfg.agent, cfg.agent_kwargs)
+    if is_remote(cfg.agent):
+        name = cfg.name or check_remote(cfg.agent, cfg.remote, cfg.agent_kwargs)
+    else:
+        check_agent(cfg.agent, cfg.agent_kwargs)
+        name = cfg.name or cfg.agent
     out = {}
     for split in cfg.splits:
         sel = load_split(cfg.data, cfg.scenes, split, cfg.episodes, cfg.strict)
@@ -312,12 +353,12 @@ def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> dict[str, Spl
             raise DatasetError(f"split {split!r} in {cfg.data} has no usable episodes; fix: run `ovon dataset "
                                f"validate {cfg.data} --scenes {cfg.scenes}` to see why")
         out[split] = sel
-    return out
+    return out, name
 
 
 def prepare(cfg: EvalConfig, workers: int | None = None) -> dict[str, list[EpisodeSpec]]:
-    """The episodes each split runs (`prepare_splits` without the skip counts)."""
-    return {split: sel.specs for split, sel in prepare_splits(cfg, workers).items()}
+    """The episodes each split runs (`prepare_splits` without the skip counts and the name)."""
+    return {split: sel.specs for split, sel in prepare_splits(cfg, workers)[0].items()}
 
 
 def skip_counts(selected: dict[str, SplitEpisodes]) -> dict[str, dict]:
@@ -327,30 +368,32 @@ def skip_counts(selected: dict[str, SplitEpisodes]) -> dict[str, dict]:
 
 
 def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
+    from ovon.agents.remote import is_remote
     from ovon.runfolder import RunFolder
 
-    selected = prepare_splits(cfg)
+    selected, name = prepare_splits(cfg)
     specs_by_split = {split: sel.specs for split, sel in selected.items()}
     run_dir = Path(run_dir)
     with RunFolder.open(run_dir, "evaluate", to_dict(cfg), run_inputs(cfg), may_change=MAY_CHANGE,
                         markers=("episodes.jsonl",)):
-        atomic_write_text(run_dir / "run.json",
-                          json.dumps({**to_dict(cfg), "name": cfg.name or cfg.agent}, indent=2))
+        atomic_write_text(run_dir / "run.json", json.dumps({**to_dict(cfg), "name": name}, indent=2))
         done = {record_key(r) for r in read_records(run_dir, repair=True)}
         units = _units(cfg, specs_by_split, done)
         total = sum(len(u["specs"]) for u in units)
         writer = RecordWriter(run_dir)
         try:
-            with progress_bar(f"evaluate {cfg.name or cfg.agent}", total, progress and total > 0) as bar:
+            with progress_bar(f"evaluate {name}", total, progress and total > 0) as bar:
                 for recs in run_jobs(run_unit, units, cfg.workers, cfg.executor):
                     for r in recs:
                         writer.write(r)
                     bar.advance(len(recs))
         finally:
             writer.close()
+            if is_remote(cfg.agent):
+                release_agent()  # in-process runs: the connection closes with the run
         wanted = {(split, int(seed), s.scene, s.episode_id)
                   for seed in cfg.seeds for split, specs in specs_by_split.items() for s in specs}
-        return finalize(run_dir, cfg.name or cfg.agent, wanted, skip_counts(selected))
+        return finalize(run_dir, name, wanted, skip_counts(selected))
 
 
 def finalize(run_dir: str | Path, name: str, wanted: set | None = None, skipped: dict | None = None) -> dict:

@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ovon.atomic import atomic_write_bytes
+from ovon.dataset.io import VAL_SPLITS
 
 EPISODES_FILE = "episodes.jsonl"
 REJECTED_FILE = "episodes.rejected.jsonl"
-SPLIT_ORDER = ("val_seen", "val_seen_synonyms", "val_unseen")
 _NUMBERS = ("spl", "soft_spl", "distance_to_goal", "steps", "collisions")
 
 
@@ -41,7 +41,7 @@ def _natural(s: str) -> tuple:
 def canonical_key(r: dict) -> tuple:
     """Sort key: splits in the paper's order, then seed, scene, episode id (numeric ids by value)."""
     split = r["split"]
-    rank = SPLIT_ORDER.index(split) if split in SPLIT_ORDER else len(SPLIT_ORDER)
+    rank = VAL_SPLITS.index(split) if split in VAL_SPLITS else len(VAL_SPLITS)
     return (rank, split, int(r["seed"]), r["scene"], _natural(str(r["episode_id"])))
 
 
@@ -216,7 +216,7 @@ def coverage_lines(splits: dict[str, dict]) -> list[str]:
     """One line per split of a summary that skipped episodes before the run, e.g. "val_seen: 2998 of
     3000 episodes (2 skipped: 1 rotation, 1 start_off_map; ...)": the table's SR covers the 2998."""
     out = []
-    for split in sorted(splits, key=lambda s: (SPLIT_ORDER.index(s) if s in SPLIT_ORDER else len(SPLIT_ORDER), s)):
+    for split in sorted(splits, key=lambda s: (VAL_SPLITS.index(s) if s in VAL_SPLITS else len(VAL_SPLITS), s)):
         sk = splits[split].get("skipped") or {}
         if sk.get("count"):
             reasons = ", ".join(f"{n} {k}" for k, n in sk.get("reasons", {}).items())
@@ -226,7 +226,7 @@ def coverage_lines(splits: dict[str, dict]) -> list[str]:
     return out
 
 
-def paper_table(rows: dict[str, dict], splits: tuple[str, ...] = SPLIT_ORDER) -> str:
+def paper_table(rows: dict[str, dict], splits: tuple[str, ...] = VAL_SPLITS) -> str:
     """Markdown table: rows = agents, columns = SR and SPL per split (mean ± std over seeds, in %)."""
     present = [s for s in splits if any(s in summ for summ in rows.values())]
     extra = sorted({s for summ in rows.values() for s in summ} - set(present))

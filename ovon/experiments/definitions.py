@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 from ovon.config.base import ConfigError, from_dict, load_yaml
+from ovon.dataset.io import VAL_SPLITS
 
 DEFS_DIR = Path(__file__).parent / "defs"
 CATALOGUE_FILES = ("scales.yaml", "recipes.yaml", "cells.yaml")
-ALL_SPLITS = ("val_seen", "val_seen_synonyms", "val_unseen")
 METRICS = ("sr", "spl")
 
 
@@ -108,7 +108,7 @@ class EvalCell:
     camera: str = ""  # training cell whose camera the evaluation uses (default: the checkpoint's own)
     agent_args: dict = field(default_factory=dict)  # --agent-arg key=value
     noise: str = ""  # --noise, e.g. actuation,odometry
-    splits: tuple[str, ...] = ALL_SPLITS
+    splits: tuple[str, ...] = VAL_SPLITS
     set: dict = field(default_factory=dict)  # --set sim.* / task.*
     scales: dict = field(default_factory=dict)  # scale name -> {agent_args: {...}, set: {...}}
 
@@ -162,7 +162,7 @@ class FailureFigure:
     name: str = ""
     caption: str = ""
     eval: str = ""
-    splits: tuple[str, ...] = ALL_SPLITS
+    splits: tuple[str, ...] = VAL_SPLITS
     groups: tuple[FailureGroup, ...] = ()
 
 

@@ -1,14 +1,13 @@
-"""Report figures (matplotlib, Agg): SR per table entry beside the paper's, the failure bars in the
-paper's grouping, and the training curve of each training cell from its `metrics.jsonl`."""
+"""Report figures: SR per table entry beside the paper's, the failure bars in the paper's grouping, and
+the training curve of each training cell from its `metrics.jsonl`. Drawn on `matplotlib.figure.Figure`
+objects and saved with `savefig`: no pyplot state, the global backend is never switched."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.figure import Figure
 
 # Curves worth a panel: imitation (BC, DAgger) and PPO runs log different scalars.
 IL_KEYS = ("episode/success", "episode/spl", "loss", "accuracy", "beta")
@@ -18,7 +17,6 @@ RL_KEYS = ("episode/success", "episode/spl", "reward/mean", "value_loss", "entro
 def _save(fig, out: Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100, bbox_inches="tight")
-    plt.close(fig)
     return out
 
 
@@ -27,8 +25,9 @@ def table_figure(title: str, table: dict, out: Path) -> Path:
     rows, cols = table["rows"], table["columns"]
     n = len(cols)
     width = 0.8 / (2 * n)
-    fig, ax = plt.subplots(figsize=(max(5.0, 1.4 * len(rows) * n / 2 + 2), 3.6))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig = Figure(figsize=(max(5.0, 1.4 * len(rows) * n / 2 + 2), 3.6))
+    ax = fig.subplots()
+    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     for j, col in enumerate(cols):
         xs_ours = [i + (2 * j - n + 0.5) * width for i in range(len(rows))]
         ours = [r["cells"][col]["ours"] for r in rows]
@@ -53,7 +52,8 @@ def failure_figure(fig_data: dict, out: Path) -> Path:
     groups, splits = fig_data["groups"], fig_data["splits"]
     n = len(splits)
     width = 0.8 / n
-    fig, ax = plt.subplots(figsize=(2 + 1.3 * len(groups), 3.8))
+    fig = Figure(figsize=(2 + 1.3 * len(groups), 3.8))
+    ax = fig.subplots()
     for j, split in enumerate(splits):
         xs = [i + (j - (n - 1) / 2) * width for i in range(len(groups))]
         vals = [g["ours"].get(split, 0.0) if g["ours"] else 0.0 for g in groups]
@@ -90,7 +90,8 @@ def training_curve(name: str, folder: Path, out: Path) -> Path | None:
     keys = [k for k in wanted if any(k in r for r in rows)]
     if not keys:
         return None
-    fig, axes = plt.subplots(1, len(keys), figsize=(3.0 * len(keys), 2.8), squeeze=False)
+    fig = Figure(figsize=(3.0 * len(keys), 2.8))
+    axes = fig.subplots(1, len(keys), squeeze=False)
     for ax, key in zip(axes[0], keys):
         xs = [r["step"] for r in rows if key in r]
         ys = [r[key] for r in rows if key in r]

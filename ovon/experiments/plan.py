@@ -1,7 +1,7 @@
 """Resolve experiment definitions at a scale into cells with their exact `ovon` commands.
 
 Why the exact commands: the runner executes them, `--dry-run` prints them, and validation parses them
-with the real `ovon` argument parser and builds the real `TrainConfig` (`ovon.cli.train.build_config`),
+with the real `ovon` argument parser and builds the real `TrainConfig` (`ovon.train.config.build_config`),
 so a definition that resolves here is one the commands accept. Layout under `<root>/<scale>/`:
 `data/` (generated scenes + episodes), `train/<cell>/`, `eval/<cell>/`, `cells/` (the runner's records),
 `locks/`, `logs/`, `reports/`.
@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from ovon.config.base import ConfigError, merge, parse_overrides
+from ovon.dataset.io import VAL_SPLITS
 from ovon.experiments.definitions import (
-    ALL_SPLITS,
     Catalogue,
     CellScale,
     DefinitionError,
@@ -32,6 +32,7 @@ from ovon.experiments.definitions import (
     parse_ref,
     row_eval,
 )
+from ovon.runfolder import flatten  # {"a": {"b": 1}, "c.d": 2} -> {"a.b": 1, "c.d": 2}: the one flattener
 
 CAMERA_FIELDS = ("width", "height", "hfov_deg", "camera_height", "min_depth", "max_depth")
 PERCEPTION = {"oracle-vl": "oracle perception", "siglip": "SigLIP", "cnn": "CNN trained from pixels"}
@@ -82,18 +83,6 @@ def display(cell: Cell, argv: list[str]) -> str:
     return shlex.join([*head, *argv])
 
 
-def flat_set(values: dict, prefix: str = "") -> dict[str, Any]:
-    """{"a": {"b": 1}, "c.d": 2} -> {"a.b": 1, "c.d": 2}."""
-    out: dict[str, Any] = {}
-    for k, v in values.items():
-        key = f"{prefix}.{k}" if prefix else str(k)
-        if isinstance(v, dict) and v:
-            out.update(flat_set(v, key))
-        else:
-            out[key] = v
-    return out
-
-
 def render_value(v: Any) -> str:
     """A value as `--set key=VALUE` text that `parse_overrides` (YAML) reads back as the same value."""
     import json
@@ -113,7 +102,7 @@ def render_value(v: Any) -> str:
 
 def set_args(values: dict, flag: str = "--set") -> list[str]:
     out: list[str] = []
-    for k, v in flat_set(values).items():
+    for k, v in flatten(values).items():
         out += [flag, f"{k}={render_value(v)}"]
     return out
 
@@ -250,7 +239,7 @@ def _train_cell(plan: Plan, name: str) -> None:
     if init is not None:
         argv += ["--init", str(init.folder / "policy.pt")]
     argv += ["--data", str(plan.episodes_dir), "--scenes", str(plan.scenes_dir)]
-    values = {**flat_set(rs.set), **flat_set(tc.set), **flat_set(_per_scale(tc, sc.name).set),
+    values = {**flatten(rs.set), **flatten(tc.set), **flatten(_per_scale(tc, sc.name).set),
               "text_cache": str(plan.base / "data" / "text_cache.pt")}
     argv += set_args(values)
     argv += ["--out", str(folder)]
@@ -308,7 +297,7 @@ def parse_cli(argv: list[str], where: str):
 
 def build_train_config(argv: list[str], where: str):
     """The `TrainConfig` that `ovon train` builds from `argv` (presets, --set and their validation)."""
-    from ovon.cli.train import build_config
+    from ovon.train.config import build_config
 
     args = parse_cli(argv, where)
     try:
@@ -324,10 +313,10 @@ def _eval_cell(plan: Plan, name: str) -> None:
     where = f"cells.yaml:evaluate.{name}"
     if not ec.agent:
         raise DefinitionError(f"{where}.agent is missing; e.g. agent: policy")
-    bad = [s for s in ec.splits if s not in ALL_SPLITS]
+    bad = [s for s in ec.splits if s not in VAL_SPLITS]
     if bad or not ec.splits or len(set(ec.splits)) != len(ec.splits):
         raise DefinitionError(f"{where}.splits = {list(ec.splits)}; expected distinct names among "
-                              f"{', '.join(ALL_SPLITS)}")
+                              f"{', '.join(VAL_SPLITS)}")
     per = _per_scale(ec, sc.name)
     folder = plan.base / "eval" / name
     argv = ["evaluate", "--agent", ec.agent]
@@ -345,7 +334,7 @@ def _eval_cell(plan: Plan, name: str) -> None:
         argv += ["--episodes", str(ev.episodes)]
     if ec.noise:
         argv += ["--noise", ec.noise]
-    values = {**flat_set(ev.set), **flat_set(ec.set), **flat_set(per.set)}
+    values = {**flatten(ev.set), **flatten(ec.set), **flatten(per.set)}
     if ec.camera:
         values = {**camera_set(plan.cells[f"train:{ec.camera}"].train_cfg), **values}
     argv += set_args(values)

@@ -3,7 +3,10 @@
 `build_report(plan, out)` writes `report.md`, `report.json` and PNG figures under `out/`. Ours are
 means ± std over evaluation seeds of finished evaluation cells only; a cell that did not finish shows
 as "not run" with the reason (never as a zero). Row setups name the perception or detection each agent
-used ("oracle perception", "oracle detection"), taken from the cells' resolved configs.
+used ("oracle perception", "oracle detection"), taken from the cells' resolved configs. The first line
+says which code the cells ran with; entries resting on a cell from another commit or a dirty tree are
+marked (`provenance`). Commands name no path of the machine they ran on: `$ROOT` (the run root) and,
+for a dataset outside it, `$EPISODES` / `$SCENES`.
 """
 
 from __future__ import annotations
@@ -13,10 +16,30 @@ from pathlib import Path
 from typing import Any
 
 from ovon.atomic import atomic_write_text, write_json
+from ovon.config.base import to_dict
 from ovon.experiments.definitions import Experiment, paper_numbers, parse_ref, row_eval
 from ovon.experiments.findings import RULE_NOTE, judge
-from ovon.experiments.plan import PERCEPTION, Cell, Plan, display
-from ovon.experiments.state import Status, plan_status, read_record
+from ovon.experiments.plan import PERCEPTION, Cell, Plan, render_value
+from ovon.experiments.provenance import (
+    MARK,
+    cell_provenance,
+    code_version,
+    headline,
+    marked_chain,
+    provenance_markdown,
+)
+from ovon.experiments.state import (
+    EPISODES_TOKEN,
+    ROOT_TOKEN,
+    SCENES_TOKEN,
+    Status,
+    full_commands,
+    plan_status,
+    portable_text,
+    read_record,
+    shell_word,
+)
+from ovon.runfolder import flatten
 
 
 # ----- what the cells hold ---------------------------------------------------------------------------
@@ -91,24 +114,26 @@ def _pct(entry: dict, metric: str) -> tuple[float, float]:
 
 
 def collect(plan: Plan) -> dict:
-    """Everything the report shows, as JSON-able data."""
+    """Everything the report shows, as JSON-able data; paths are written `$ROOT`, `$EPISODES`, `$SCENES`."""
     from ovon.evaluate.results import summarize
-
     statuses = plan_status(plan)
+    prov = cell_provenance(plan, statuses, code_version())
     evals: dict[str, dict] = {}
     for cid, cell in plan.cells.items():
         if cell.kind != "eval":
             continue
         st = statuses[cid]
-        info: dict[str, Any] = {"status": st.state if st.state == "done" else str(st), "setup": setup_label(plan, cell),
-                                "summary": None}
+        info: dict[str, Any] = {"status": st.state if st.state == "done" else portable_text(plan, str(st)),
+                                "setup": setup_label(plan, cell), "summary": None,
+                                "marked": st.state == "done" and marked_chain(plan, prov, cid)}
         if st.state == "done":
             records = eval_records(plan, cell)
             info["summary"] = summarize(records)
             info["records"] = records
         evals[cell.name] = info
     out = {"experiments": {}, "scale": plan.scale.name, "scale_description": plan.scale.description,
-           "root": str(plan.root), "cells": _cells_info(plan, statuses)}
+           "root": ROOT_TOKEN, "command": run_command_line(plan), "paths": path_legend(plan), "provenance": prov,
+           "cells": _cells_info(plan, statuses, prov)}
     for exp in plan.experiments:
         out["experiments"][exp.name] = experiment_results(exp, evals)
     for info in evals.values():
@@ -139,6 +164,7 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
                     ours["seeds"] = len(summ["seeds"])
                 entry = {"eval": name, "split": col.split, "ours": ours,
                          "status": ev["status"] if ours is None else "done",
+                         "marked": ours is not None and bool(ev.get("marked")),
                          "paper": paper_numbers(row, col.name, exp.source)}
                 cells[col.name] = entry
                 entries[(row.name, col.name)] = entry
@@ -158,7 +184,8 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
                            "paper_range": list(g.paper_range) or None})
         success = {s: 100.0 * fb[s]["success"] for s in fig.splits if s in fb} if fb else None
         figures.append({"name": fig.name, "caption": fig.caption, "eval": fig.eval, "splits": list(fig.splits),
-                        "setup": ev["setup"], "status": ev["status"], "groups": groups, "success": success})
+                        "setup": ev["setup"], "status": ev["status"], "marked": bool(recs and ev.get("marked")),
+                        "groups": groups, "success": success})
     res["figures"] = figures
 
     def look(source: str):
@@ -175,16 +202,36 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
     return res
 
 
-def _cells_info(plan: Plan, statuses: dict[str, Status]) -> dict:
+def run_command_line(plan: Plan) -> str:
+    """The `ovon experiment run` that makes every cell of the report: its scale overrides included."""
+    default = flatten(to_dict(plan.catalogue.scales[plan.scale.name]))
+    now = flatten(to_dict(plan.scale))
+    sets = [f"{k}={render_value(v)}" for k, v in now.items() if default.get(k, object()) != v]
+    words = ["ovon", "experiment", "run", ",".join(e.name for e in plan.experiments), "--scale", plan.scale.name,
+             "--root", ROOT_TOKEN, *(w for kv in sets for w in ("--set", portable_text(plan, kv)))]
+    return " ".join(shell_word(w) for w in words)
+
+
+def path_legend(plan: Plan) -> dict[str, str]:
+    """What the path tokens of the commands stand for."""
+    out = {ROOT_TOKEN: "the run root (`--root`)"}
+    if plan.scale.data.source == "paths":
+        out[EPISODES_TOKEN] = "the episode dataset (the scale's `data.episodes`)"
+        out[SCENES_TOKEN] = "the scene datasets (the scale's `data.scenes`)"
+    return out
+
+
+def _cells_info(plan: Plan, statuses: dict[str, Status], prov: dict) -> dict:
     from ovon.experiments.state import last_update
 
     out = {}
     for cid, cell in plan.cells.items():
         rec = read_record(plan, cell) or {}
-        info = {"status": statuses[cid].state, "detail": statuses[cid].detail,
-                "commands": [display(cell, argv) for argv in cell.commands],
+        mine = prov["cells"].get(cid, {})
+        info = {"status": statuses[cid].state, "detail": portable_text(plan, statuses[cid].detail),
+                "commands": full_commands(plan, cell),
                 "wall_min": round(float(rec.get("wall_s", 0.0)) / 60, 1), "attempts": rec.get("attempts", 0),
-                "code": rec.get("code", "")}
+                "code": ", ".join(mine.get("code", [])), "marked": bool(mine.get("marked"))}
         if cell.kind == "train":
             info["updates"] = last_update(cell.folder)
             info["planned_updates"] = cell.total
@@ -219,11 +266,15 @@ def table_markdown(table: dict) -> list[str]:
                     cells.append(f"not run (paper {paper})")
                     notes.setdefault(e["eval"], e["status"])
                 else:
-                    cells.append(f"**{fmt(e['ours'][m])}** (paper {paper})")
+                    mark = MARK if e.get("marked") else ""
+                    cells.append(f"**{fmt(e['ours'][m])}**{mark} (paper {paper})")
         lines.append(f"| {row['name']} | {row['setup']} | " + " | ".join(cells) + " |")
     if notes:
         lines.append("")
         lines += [f"- `{k}` not run: {v}" for k, v in notes.items()]
+    if any(e.get("marked") for r in table["rows"] for e in r["cells"].values()):
+        lines += ["", f"{MARK} its evaluation, or a cell it needs, ran with another commit than most cells or from a "
+                  "dirty tree (table \"Provenance\")."]
     counts = {(e["ours"]["episodes"], e["ours"]["seeds"]) for r in table["rows"] for e in r["cells"].values()
               if e["ours"]}
     if counts:
@@ -247,7 +298,8 @@ def findings_markdown(findings: list[dict]) -> list[str]:
 
 
 def markdown(data: dict, figures: dict[str, list[str]]) -> str:
-    parts = [f"# Experiments at scale `{data['scale']}`", "", data["scale_description"], "",
+    parts = [f"# Experiments at scale `{data['scale']}`", "", headline(data["provenance"]), "",
+             data["scale_description"], "",
              "Each entry: **ours** (mean ± std over evaluation seeds) and the paper's number. A cell that did "
              "not finish shows as *not run*.", ""]
     all_findings = []
@@ -256,7 +308,8 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
         if "table" in exp:
             parts += [f"{exp['table']['caption']}:", "", *table_markdown(exp["table"]), ""]
         for fig in exp["figures"]:
-            parts += [f"{fig['caption']} - ours: {fig['setup']} ({fig['status']}).", ""]
+            mark = MARK if fig.get("marked") else ""
+            parts += [f"{fig['caption']} - ours{mark}: {fig['setup']} ({fig['status']}).", ""]
             parts += _failure_table(fig) + [""]
         parts += [f"![{p}]({p})" for p in figures.get(name, [])] + [""]
         all_findings += exp["findings"]
@@ -266,14 +319,18 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
     parts += ["## Training", "", "| cell | status | updates | wall time (min) | attempts |", "|---|---|---|---|---|"]
     for cid, info in data["cells"].items():
         if cid.startswith("train:"):
-            parts.append(f"| {cid[6:]} | {info['status']} | {info['updates'] or '–'} / {info['planned_updates'] or '?'}"
+            mark = MARK if info["marked"] else ""
+            parts.append(f"| {cid[6:]}{mark} | {info['status']} | {info['updates'] or '–'} / "
+                         f"{info['planned_updates'] or '?'}"
                          f" | {info['wall_min']} | {info['attempts']} |")
-    again = f"ovon experiment run {','.join(data['experiments'])} --scale {data['scale']} --root {data['root']}"
+    legend = "; ".join(f"`{k}` is {v}" for k, v in data["paths"].items())
     parts += ["", *[f"![curve {p}]({p})" for p in figures.get("_curves", [])], "",
-              "## Commands", "", f"Every cell's command (all of them: `{again}`).", "", "```"]
+              "## Provenance", "", *provenance_markdown(data["provenance"]), "",
+              "## Commands", "", f"Every cell's command (all of them: `{data['command']}`); {legend}.", "", "```"]
     for cid, info in data["cells"].items():
         code = f", {info['code']}" if info["code"] else ""
-        parts += [f"# {cid}: {info['status']}, {info['wall_min']} min{code}", *info["commands"]]
+        mark = f" {MARK}" if info["marked"] else ""
+        parts += [f"# {cid}: {info['status']}, {info['wall_min']} min{code}{mark}", *info["commands"]]
     parts += ["```", ""]
     return "\n".join(parts)
 

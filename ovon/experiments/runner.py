@@ -21,10 +21,12 @@ from rich.console import Console
 
 from ovon.experiments.definitions import DefinitionError
 from ovon.experiments.plan import Cell, Plan, display
+from ovon.experiments.provenance import code_version
 from ovon.experiments.select import select
 from ovon.experiments.state import (
     Status,
     cell_lock,
+    config_unknown,
     count_lines,
     full_commands,
     identity,
@@ -35,6 +37,7 @@ from ovon.experiments.state import (
     plan_status,
     read_record,
     record_path,
+    resolved_config,
     write_record,
 )
 
@@ -134,22 +137,6 @@ def run_command(cell: Cell, argv: list[str], log: Path, on_poll=None, on_start=N
     return int(proc.returncode)
 
 
-def code_version() -> str:
-    """The ovon code a cell ran with: its version and, in a git checkout, the commit (+dirty)."""
-    import ovon
-
-    text = f"ovon {getattr(ovon, '__version__', '?')}"
-    where = str(Path(ovon.__file__).resolve().parent)
-    try:
-        rev = subprocess.run(["git", "-C", where, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                             timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "-C", where, "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return text
-    return f"{text} ({rev}{'+dirty' if dirty else ''})" if rev else text
-
-
 def log_tail(log: Path, lines: int = 6) -> str:
     try:
         text = log.read_bytes()[-8000:].decode("utf-8", "replace")
@@ -171,9 +158,12 @@ def commands_to_run(cell: Cell) -> list[list[str]]:
 def execute(plan: Plan, cell: Cell, progress=None) -> int:
     """Run the cell's commands under its record; returns the exit code (0 = finished)."""
     rec = read_record(plan, cell) or {}
+    if rec.get("state") == "running":  # the attempt before died with its runner: keep what it ran with
+        rec.setdefault("history", []).append({"started": rec.get("started"), "wall_s": None, "rc": "killed",
+                                              "code": rec.get("code")})
     rec.update({"kind": cell.kind, "name": cell.name, "identity": identity(plan, cell), "state": "running",
                 "attempts": int(rec.get("attempts", 0)) + 1, "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-                "code": code_version()})
+                "code": code_version(), "config": resolved_config(plan, cell)})
     write_record(plan, cell, rec)
     log = log_path(plan, cell)
     t0 = time.perf_counter()
@@ -220,7 +210,8 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
 def _finish_record(plan: Plan, cell: Cell, rec: dict, t0: float) -> None:
     wall = time.perf_counter() - t0
     rec["wall_s"] = round(float(rec.get("wall_s", 0.0)) + wall, 1)
-    rec.setdefault("history", []).append({"started": rec["started"], "wall_s": round(wall, 1), "rc": rec.get("rc")})
+    rec.setdefault("history", []).append({"started": rec["started"], "wall_s": round(wall, 1), "rc": rec.get("rc"),
+                                          "code": rec.get("code")})
     write_record(plan, cell, rec)
 
 
@@ -305,6 +296,10 @@ def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None
                               "which the runner never moves; fix: --redo the training or evaluation cells instead")
     for cid in cascade:
         statuses[cid] = Status("redo", "its old folder will be kept as <folder>.old-N")
+    unknown = [c for c in config_unknown(plan, ids) if c not in cascade]
+    if unknown:
+        say(console, f"note: {len(unknown)} finished cell(s) ran before ovon recorded resolved configs "
+                     f"({', '.join(unknown)}): only their commands are compared; --redo them to record it")
     if dry_run:
         head = f"{plan.names} at scale {plan.scale.name}, root {plan.root}: {len(ids)} of {len(plan.cells)} cells"
         say(console, head + (f" (shard {shard[0]}/{shard[1]})" if shard else ""))

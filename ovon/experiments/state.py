@@ -3,29 +3,35 @@
 Why records: a cell is finished when its command exited 0 and its outputs exist; the record
 (`<root>/<scale>/cells/<kind>-<name>.json`, written atomically) says so, with the command, the
 identities of what it read (data listing, init/checkpoint content hashes), the number of attempts and
-the wall time. A cell whose definition or inputs changed since it ran is "changed": never silently
-reused, never silently recomputed (`--redo` moves the old folder aside).
+the wall time, the code it ran with (`ovon 0.1.0 (commit[+dirty])`, per attempt) and its resolved
+config. A cell whose definition, resolved config (a preset changed in code) or inputs changed since it
+ran is "changed": never silently reused, never silently recomputed (`--redo` moves the old folder aside).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import json
 import os
+import re
 import shlex
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ovon.atomic import write_json
+from ovon.config.base import to_dict
 from ovon.experiments.plan import Cell, Plan, display
-from ovon.runfolder import FileLock, RunFolderError
+from ovon.runfolder import FileLock, RunFolderError, differences
 
 # Options that may change between the sessions of one evaluation folder without changing an episode's
 # result (the evaluation resumes and adds what is missing), and the one that marks a training resume.
 EVAL_MAY_CHANGE = ("--seeds", "--episodes", "--splits", "--workers", "--executor", "--no-progress")
 FLAGS = ("--no-progress", "--resume")
-ROOT_TOKEN = "$ROOT"
+ROOT_TOKEN, EPISODES_TOKEN, SCENES_TOKEN = "$ROOT", "$EPISODES", "$SCENES"
+TOKENS = (ROOT_TOKEN, EPISODES_TOKEN, SCENES_TOKEN)
 
 try:
     import fcntl
@@ -70,23 +76,65 @@ def write_record(plan: Plan, cell: Cell, record: dict) -> None:
 
 
 # ----- identity --------------------------------------------------------------------------------------
-def _portable(plan: Plan, arg: str) -> str:
-    """`arg` with a leading root (or a `key=` value starting with it) written `$ROOT`."""
-    root = str(plan.root)
-    if root in ("", "."):
-        return arg
+def path_tokens(plan: Plan, legacy: bool = False) -> list[tuple[str, str]]:
+    """(path, token) pairs that commands and reports write as a token: the run root as `$ROOT`, and a dataset
+    read from elsewhere (`data.source: paths`) as `$EPISODES` / `$SCENES`, so that nothing names the
+    machine it ran on. `legacy`: only the root, as records written before ovon 0.1.0's provenance did."""
+    pairs = [] if str(plan.root) in ("", ".") else [(str(plan.root), ROOT_TOKEN)]
+    if not legacy and plan.scale.data.source == "paths":
+        pairs += [(str(plan.episodes_dir), EPISODES_TOKEN), (str(plan.scenes_dir), SCENES_TOKEN)]
+    return sorted(pairs, key=lambda p: -len(p[0]))  # the most specific path first
+
+
+def _tokenised(path: str, pairs: list[tuple[str, str]]) -> str:
+    for prefix, token in pairs:
+        if path == prefix or path.startswith(prefix.rstrip("/") + "/"):
+            return token + path[len(prefix.rstrip("/")):]
+    return path
+
+
+def _portable(plan: Plan, arg: str, legacy: bool = False) -> str:
+    """`arg` with a leading root or dataset path (or a `key=` value starting with one) written as its token."""
+    pairs = path_tokens(plan, legacy)
+    whole = _tokenised(arg, pairs)
+    if whole != arg:
+        return whole
     key, eq, value = arg.partition("=")
-    if eq and value.startswith(root) and not arg.startswith(root):
-        return key + eq + ROOT_TOKEN + value[len(root):]
-    return ROOT_TOKEN + arg[len(root):] if arg.startswith(root) else arg
+    return key + eq + _tokenised(value, pairs) if eq else arg
 
 
-def full_commands(plan: Plan, cell: Cell) -> list[str]:
-    """The commands as text with the root written `$ROOT` (moving the root changes nothing)."""
-    return [display(cell, [_portable(plan, a) for a in argv]) for argv in cell.commands]
+def portable_text(plan: Plan, text: str) -> str:
+    """Free text (a status detail) with every root or dataset path in it written as its token."""
+    for prefix, token in path_tokens(plan):
+        text = re.sub(re.escape(prefix.rstrip("/")) + r"(?=/|$|[\s,;:)'\"])", lambda _m, t=token: t, text)
+    return text
 
 
-def identity(plan: Plan, cell: Cell) -> list[str]:
+def shell_word(arg: str) -> str:
+    """`arg` quoted for a POSIX shell, leaving the path tokens expandable: `$ROOT/cpu/train/x` stays bare
+    (or double-quoted around other special characters), so a command can be pasted after `ROOT=...`."""
+    plain = arg
+    for token in TOKENS:
+        plain = plain.replace(token, "T")
+    if plain == arg or "$" in plain:
+        return shlex.quote(arg)
+    if shlex.quote(plain) == plain:
+        return arg
+    return f'"{arg}"' if not any(c in plain for c in '"\\`') else shlex.quote(arg)
+
+
+def portable_display(plan: Plan, cell: Cell, argv: list[str], legacy: bool = False) -> str:
+    """The command as `display` writes it, with its paths written as tokens (see `path_tokens`)."""
+    return " ".join([display(cell, []), *(shell_word(_portable(plan, a, legacy)) for a in argv)])
+
+
+def full_commands(plan: Plan, cell: Cell, legacy: bool = False) -> list[str]:
+    """The commands as text with the root written `$ROOT` and a dataset outside it `$EPISODES` / `$SCENES`
+    (moving either changes nothing)."""
+    return [portable_display(plan, cell, argv, legacy) for argv in cell.commands]
+
+
+def identity(plan: Plan, cell: Cell, legacy: bool = False) -> list[str]:
     """What must not change for a finished cell to count: its commands without the options that only
     extend an evaluation (seeds, episodes, splits) or set its parallelism."""
     out = []
@@ -99,9 +147,28 @@ def identity(plan: Plan, cell: Cell) -> list[str]:
             if cell.kind == "eval" and a in EVAL_MAY_CHANGE:
                 skip = a not in FLAGS
                 continue
-            kept.append(_portable(plan, a))
-        out.append(display(cell, kept))
+            kept.append(a)
+        out.append(portable_display(plan, cell, kept, legacy))
     return out
+
+
+def _in_form_of(recorded: list[str] | None, plan: Plan, cell: Cell, what) -> list[str]:
+    """The cell's `what(plan, cell)` in the form of `recorded` (older records: only the root a token), so
+    a message names the real difference, not the form."""
+    new_form = any(t in c for c in recorded or [] for t in (EPISODES_TOKEN, SCENES_TOKEN))
+    return what(plan, cell, legacy=not new_form and plan.scale.data.source == "paths")
+
+
+def same_commands(recorded: list[str] | None, plan: Plan, cell: Cell, what) -> bool:
+    """Whether recorded command text is the cell's `what(plan, cell)` (full_commands or identity), word by
+    word (quoting aside), also in the form records had before datasets outside the root were tokens."""
+    if recorded is None:
+        return False
+    try:
+        words = [shlex.split(c) for c in recorded]
+    except ValueError:
+        return False
+    return any(words == [shlex.split(c) for c in what(plan, cell, legacy=legacy)] for legacy in (False, True))
 
 
 def first_difference(old: list[str], new: list[str]) -> str:
@@ -118,6 +185,95 @@ def first_difference(old: list[str], new: list[str]) -> str:
             extra = ta[len(tb):] or tb[len(ta):]
             return f"{'removed' if len(ta) > len(tb) else 'added'} {' '.join(extra[:4])}"
     return ""
+
+
+# ----- resolved config -------------------------------------------------------------------------------
+# Keys of a resolved config that say where or how fast a cell runs, or what an evaluation extends (seeds,
+# episodes, splits): they may change without making a finished cell stale. Inputs (the dataset, a
+# checkpoint) are compared by content (`inputs`), not by path.
+CONFIG_MAY_CHANGE = {
+    "train": ("env_workers", "threads", "rollout_threads", "device", "encoder.device", "progress", "log_every",
+              "checkpoint_every", "keep_checkpoints", "text_cache", "bc.record_workers"),
+    "eval": ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "name"),
+    "data": (),
+}
+
+
+def resolved_config(plan: Plan, cell: Cell) -> dict | None:
+    """The config the cell's command resolves to now, as JSON (paths as tokens): `ovon train`'s TrainConfig
+    (presets and `--set`), `ovon evaluate`'s EvalConfig (agent arguments, noise, camera, task) with the
+    agent's own config where its class resolves one (`resolved_config(**agent_args)`, e.g. VLFM's preset),
+    `ovon dataset generate`'s GenerationConfig. A preset changed in code changes it where the command line
+    does not. None when the cell has no command (the user's own dataset) or cannot be resolved now (e.g.
+    its checkpoint is gone)."""
+    if not cell.commands:
+        return None
+    try:
+        return _tokenised_values(plan, _config(cell, cell.commands[-1]))
+    except (OSError, ValueError, TypeError, KeyError, ImportError):  # ConfigError is a ValueError
+        return None
+
+
+def _config(cell: Cell, argv: list[str]) -> dict:
+    from ovon.experiments.plan import parse_cli
+
+    if cell.kind == "train":
+        return to_dict(cell.train_cfg)
+    args = parse_cli(argv, cell.id)
+    if cell.kind == "data":
+        from ovon.cli.dataset import generation_config
+
+        return to_dict(generation_config(args))
+    from ovon.agents import load_agent_class
+    from ovon.cli.evaluate import eval_config
+
+    with contextlib.redirect_stdout(io.StringIO()):  # "camera of the checkpoint: ..."
+        cfg = eval_config(args)
+    out = to_dict(cfg)
+    agent = getattr(load_agent_class(cfg.agent), "resolved_config", None)  # an agent's own presets (VLFM)
+    if callable(agent):
+        out["agent_config"] = to_dict(agent(**dict(cfg.agent_kwargs)))
+    return out
+
+
+def _tokenised_values(plan: Plan, value: Any) -> Any:
+    value = json.loads(json.dumps(value, default=str))
+    pairs = path_tokens(plan)
+
+    def walk(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {k: walk(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [walk(x) for x in v]
+        return _tokenised(v, pairs) if isinstance(v, str) else v
+
+    return walk(value)
+
+
+def config_change(plan: Plan, cell: Cell, record: dict) -> str:
+    """"" when the cell's recorded resolved config is its config now (or either is unknown), else the
+    first differing key, e.g. `finetune.anchor "none" -> "kl"` (and how many more differ)."""
+    old = record.get("config")
+    if not isinstance(old, dict):
+        return ""
+    now = resolved_config(plan, cell)
+    if now is None:
+        return ""
+    diffs = differences(old, now, CONFIG_MAY_CHANGE[cell.kind])
+    if not diffs:
+        return ""
+    return diffs[0] + (f" (and {len(diffs) - 1} more)" if len(diffs) > 1 else "")
+
+
+def config_unknown(plan: Plan, ids: list[str]) -> list[str]:
+    """Finished cells whose record predates resolved configs: only their commands can be compared."""
+    out = []
+    for cid in ids:
+        cell = plan.cells[cid]
+        rec = read_record(plan, cell) if cell.commands else None
+        if rec and rec.get("state") == "done" and "config" not in rec:
+            out.append(cid)
+    return out
 
 
 # ----- inputs ----------------------------------------------------------------------------------------
@@ -263,16 +419,20 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
     rec = read_record(plan, cell)
     if rec is not None and rec.get("state") == "unreadable":
         return Status("changed", f"its record {record_path(plan, cell)} is unreadable")
-    if rec is not None and rec.get("identity") != identity(plan, cell):
-        why = first_difference(rec.get("identity") or [], identity(plan, cell))
+    if rec is not None and not same_commands(rec.get("identity"), plan, cell, identity):
+        why = first_difference(rec.get("identity") or [], _in_form_of(rec.get("identity"), plan, cell, identity))
         return Status("changed", f"the definition changed since it ran: {why}")
+    why = config_change(plan, cell, rec) if rec is not None else ""
+    if why:
+        return Status("changed", f"its resolved config changed since it ran: {why}")
     if rec is not None and rec.get("state") == "done" and finished_outputs(plan, cell):
         now = inputs(plan, cell)
         moved = [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
         if moved:
             return Status("changed", f"its input(s) {', '.join(moved)} changed since it ran")
-        if rec.get("commands") != full_commands(plan, cell):
-            why = first_difference(rec.get("commands") or [], full_commands(plan, cell))
+        if not same_commands(rec.get("commands"), plan, cell, full_commands):
+            why = first_difference(rec.get("commands") or [], _in_form_of(rec.get("commands"), plan, cell,
+                                                                         full_commands))
             return Status("partial", f"to extend: {why}")
         return Status("done", f"{rec.get('wall_s', 0) / 60:.1f} min")
     waiting = [d for d in cell.deps if statuses.get(d, Status("done")).state != "done"]

@@ -1,4 +1,4 @@
-"""Expert configs: every number of the paper's expert is a config value (expert.md).
+"""Expert configs: every number of the paper's expert is a config value (docs/spec.md#experts).
 
 The agent's turn angle and forward step, the camera's FOV and the success radius are NOT here: the
 experts derive them from the sim/task config (`ovon.experts.rig.Embodiment`), their one source."""
@@ -13,7 +13,7 @@ from ovon.config.base import in_range, non_negative, positive
 
 @dataclass(frozen=True)
 class FrontierExpertConfig:
-    """Frontier-exploration teacher (expert.md); defaults are the paper's / upstream's values."""
+    """Frontier-exploration teacher (docs/spec.md#frontier-expert); defaults are the paper's / upstream's values."""
 
     view_range_m: float = positive(3.0)  # cells further than this never become explored
     pocket_area_m2: float = non_negative(1.5)  # unexplored components smaller than this (m^2) count as explored

@@ -1,7 +1,7 @@
 """Path following and the frontier search shared by the experts.
 
 * `descend_path`: steepest descent on a cached distance field (the geodesic module's `dist` array), so a
-  step never runs a search when a cached field answers by lookup (expert.md).
+  step never runs a search when a cached field answers by lookup (docs/spec.md#expert-speed).
 * `lookahead_target`: the furthest point of a path, at most `lookahead` cells ahead, that the agent cell
   sees through navigable cells (closed-supercover test): heading targets never cut wall corners.
 * `action_towards`: turn when the target is more than `threshold` off the heading, else MOVE_FORWARD.
@@ -276,7 +276,7 @@ def _wrap(a: float) -> float:
 class Steering:
     """Turns a desired heading error into an action that does not walk into walls.
 
-    Rule (expert.md): turn toward the waypoint when it is more than `threshold` off, else MOVE_FORWARD.
+    Rule (docs/spec.md#action-rule): turn toward the waypoint when it is more than `threshold` off, else MOVE_FORWARD.
     The experts are privileged, so a forward that the map says would be blocked is replaced by a detour:
     the reachable heading (multiples of one turn) with a free forward step closest to the desired one,
     committed to until it has been taken (else turn-back ping-pong). A collision the map did not predict

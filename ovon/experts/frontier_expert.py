@@ -71,7 +71,7 @@ class FrontierExpert:
             self.grid = grid
             cs = float(grid.cell_size)
             nav = np.ascontiguousarray(grid.navigable, dtype=np.bool_)
-            free = np.ascontiguousarray(getattr(grid, "free", nav), dtype=np.bool_) | nav
+            free = np.ascontiguousarray(grid.free, dtype=np.bool_) | nav
             self.explored_map = ExploredMap(free, nav, cs, self.body.fov_deg, cfg.view_range_m)
             min_cells = max(1, int(math.ceil(cfg.min_frontier_m / cs - 1e-9)))
             self.frontier_map = FrontierMap(nav, self.explored_map.explored, cs, cfg.pocket_area_m2, min_cells)

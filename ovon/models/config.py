@@ -1,6 +1,6 @@
 """Model configs: which perception encoders feed the policy, and the policy's size.
 
-Why a dataclass per part: every number of baselines.md is a config value, so a YAML file or a
+Why a dataclass per part: every number of docs/spec.md#baselines is a config value, so a YAML file or a
 `key=value` override (see `ovon.config.base`) can change it and a wrong key fails loudly.
 """
 
@@ -66,7 +66,7 @@ class PolicyConfig:
     mlp: int = in_range(1024, 1, 262144)
     context: int = in_range(100, 1, 100_000)
     prev_action_dim: int = in_range(32, 0, 65536)
-    # The first `num_actions` of STOP FORWARD LEFT RIGHT UP DOWN (task.md): 4 leaves the camera tilt out,
+    # The first `num_actions` of STOP FORWARD LEFT RIGHT UP DOWN (docs/spec.md#actions): 4 leaves the camera tilt out,
     # which RL from scratch at CPU scale needs (README "RL at CPU scale").
     num_actions: int = in_range(6, 4, 6)
     rope_base: float = positive(10000.0)

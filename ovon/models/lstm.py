@@ -1,4 +1,4 @@
-"""LSTM core: the RNN baseline of baselines.md (same inputs and heads as the transformer).
+"""LSTM core: the RNN baseline of docs/spec.md#end-to-end-policy (same inputs and heads as the transformer).
 
 Why `matched_lstm_hidden`: the paper compares against "a 4-layer LSTM of similar parameter count",
 so the width is solved from the transformer core's count instead of being guessed. With the paper
@@ -44,7 +44,7 @@ LSTMState = tuple[torch.Tensor, torch.Tensor]
 
 @contextmanager
 def _onednn_off(device: torch.device) -> Iterator[None]:
-    """Single-step CPU LSTM is ~5x faster without oneDNN (platform.md: ~1 ms vs ~10 ms)."""
+    """Single-step CPU LSTM is ~5x faster without oneDNN (docs/spec.md#platform-notes: ~1 ms vs ~10 ms)."""
     if device.type != "cpu" or not torch.backends.mkldnn.enabled:
         yield
         return

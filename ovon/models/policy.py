@@ -1,4 +1,4 @@
-"""Actor-critic policy over per-step embeddings (baselines.md), shared by BC, DAgger and PPO.
+"""Actor-critic policy over per-step embeddings (docs/spec.md#end-to-end-policy), shared by BC, DAgger and PPO.
 
     o_t = [image_emb, goal_emb, prev_action_emb (, goal similarity)]  ->  Linear(hidden)  ->  core  ->  heads
 

@@ -19,9 +19,14 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from ovon.models.encoders.siglip import DEFAULT_SIGLIP
-from ovon.plugins import is_spec, load_class
+from ovon.plugins import load_named
 
-SCORERS = ("oracle-vl", "siglip", "constant")
+BUILTIN: dict[str, str] = {
+    "oracle-vl": "ovon.models.scorers:OracleVLScorer",
+    "siglip": "ovon.models.scorers:SiglipScorer",
+    "constant": "ovon.models.scorers:ConstantScorer",
+}
+SCORERS = tuple(BUILTIN)
 
 
 @dataclass(frozen=True)
@@ -84,7 +89,7 @@ class OracleVLScorer:
 
     def score(self, observation: dict, goal_text: str) -> float:
         p = observation["privileged"]
-        key = getattr(p.world, "key", None) or id(p.world)
+        key = p.world.key or id(p.world)  # an unnamed scene (scene_id "") is told apart by identity
         if key != self._scene_key:
             self.encoder.set_scene({o.id: o.category for o in p.world.scene.objects if o.category})
             self._scene_key = key
@@ -101,7 +106,8 @@ class SiglipScorer:
     name = "SigLIP value"
     privileged = False
 
-    def __init__(self, cfg: ScorerConfig | None = None) -> None:
+    def __init__(self, cfg: ScorerConfig | None = None, text_encoder=None) -> None:
+        del text_encoder  # SigLIP scores with its own text tower
         from ovon.models.encoders.siglip import SiglipImageEncoder
         from ovon.models.encoders.text import SiglipText
 
@@ -124,7 +130,8 @@ class ConstantScorer:
     name = "no value (constant)"
     privileged = False
 
-    def __init__(self, cfg: ScorerConfig | None = None) -> None:
+    def __init__(self, cfg: ScorerConfig | None = None, text_encoder=None) -> None:
+        del text_encoder  # no semantics
         self.cfg = cfg or ScorerConfig(kind="constant")
 
     def reset(self, seed: int) -> None:
@@ -135,16 +142,10 @@ class ConstantScorer:
 
 
 def make_scorer(cfg: ScorerConfig | None = None, text_encoder=None) -> ImageTextScorer:
+    """The scorer `cfg.kind` names; built-ins get the shared goal-text encoder, plug-ins only the config."""
     cfg = cfg or ScorerConfig()
-    if cfg.kind == "oracle-vl":
-        return OracleVLScorer(cfg, text_encoder)
-    if cfg.kind == "siglip":
-        return SiglipScorer(cfg)
-    if cfg.kind == "constant":
-        return ConstantScorer(cfg)
-    if is_spec(cfg.kind):
-        return load_class(cfg.kind, "value.scorer.kind", f"one of {list(SCORERS)} or package.module:Class")(cfg)
-    raise ValueError(f"value.scorer.kind = {cfg.kind!r} is unknown; use one of {list(SCORERS)} or package.module:Class")
+    cls = load_named(cfg.kind, BUILTIN, "value.scorer.kind")
+    return cls(cfg, text_encoder) if cfg.kind in BUILTIN else cls(cfg)
 
 
 def describe_scorer(cfg: ScorerConfig) -> str:

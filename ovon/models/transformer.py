@@ -1,6 +1,6 @@
 """Decoder-only transformer core (LLaMA-style block) with a sliding-window key/value cache.
 
-Why this design (baselines.md): 4 blocks of RMSNorm -> causal self-attention with rotary positions ->
+Why this design (docs/spec.md#end-to-end-policy): 4 blocks of RMSNorm -> causal self-attention with rotary positions ->
 RMSNorm -> SiLU-gated MLP, no dropout, context 100 steps.
 
 Position and masking conventions (shared by `forward` and the acting paths, so they agree exactly):

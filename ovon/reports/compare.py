@@ -6,7 +6,8 @@ import json
 from collections import defaultdict
 from pathlib import Path
 
-from ovon.evaluate.results import SPLIT_ORDER, coverage_lines, paper_table, read_records, summarize
+from ovon.dataset.io import VAL_SPLITS
+from ovon.evaluate.results import coverage_lines, paper_table, read_records, summarize
 from ovon.reports.labels import agent_label, noise_label
 from ovon.task.tracker import FAILURE_LABELS
 
@@ -72,7 +73,7 @@ def distance_bin(d: float) -> str:
 def noise_table(rows: list[tuple[str, str, dict]]) -> str:
     """The paper's noise table: one line per (agent, eval noise), agents in first-seen order, the run
     without noise first; SR / SPL per split (mean ± std over seeds, %)."""
-    splits = [s for s in SPLIT_ORDER if any(s in summ for _, _, summ in rows)]
+    splits = [s for s in VAL_SPLITS if any(s in summ for _, _, summ in rows)]
     head = "| method | eval noise | " + " | ".join(f"{s} SR | {s} SPL" for s in splits) + " |"
     lines = [head, "|---|---|" + "---|---|" * len(splits)]
     order = list(dict.fromkeys(label for label, _, _ in rows))

@@ -22,7 +22,7 @@ def noise_label(meta: dict) -> str:
         mult = float(noise.get("actuation_multiplier", 1.0))
         parts.append(f"actuation:{noise['actuation']}" + ("" if mult == 1.0 else f"*{mult:g}"))
     if noise.get("odometry"):
-        parts.append("odometry")
+        parts.append("odometry" + (":drift" if noise.get("odometry_mode") == "drift" else ""))
     return ", ".join(parts)
 
 

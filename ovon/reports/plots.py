@@ -1,16 +1,17 @@
-"""Figures: failure breakdown per split (the paper's figure), SR vs geodesic distance, SR per category."""
+"""Figures: failure breakdown per split (the paper's figure), SR vs geodesic distance, SR per category.
+
+Drawn on `matplotlib.figure.Figure` objects and saved with `savefig`: no pyplot state, and the global
+backend is never switched (importing this in a notebook leaves its backend as it was)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from ovon.reports.compare import DISTANCE_BINS, distance_bin, failure_breakdown, sr_by  # noqa: E402
-from ovon.task.tracker import FAILURE_LABELS  # noqa: E402
+from ovon.dataset.io import VAL_SPLITS
+from ovon.reports.compare import DISTANCE_BINS, distance_bin, failure_breakdown, sr_by
+from ovon.task.tracker import FAILURE_LABELS
 
 # The paper's colours: timeouts orange family (ignored goal pink, missed goal brown), wrong object yellow,
 # entered-and-left purple.
@@ -23,17 +24,17 @@ FAILURE_COLORS = {
     "stop_left_goal": "#9467bd",
     "stop_never_saw_goal": "#c49c94",
 }
-SPLIT_ORDER = ("val_seen", "val_seen_synonyms", "val_unseen")
 
 
 def _ordered(splits):
-    return [s for s in SPLIT_ORDER if s in splits] + sorted(set(splits) - set(SPLIT_ORDER))
+    return [s for s in VAL_SPLITS if s in splits] + sorted(set(splits) - set(VAL_SPLITS))
 
 
 def plot_failures(name: str, records: list[dict], out: Path) -> Path:
     fb = failure_breakdown(records)
     splits = _ordered(fb)
-    fig, ax = plt.subplots(figsize=(3.6 + 1.6 * len(splits), 4.2))
+    fig = Figure(figsize=(3.6 + 1.6 * len(splits), 4.2))
+    ax = fig.subplots()
     bottoms = [0.0] * len(splits)
     for label in FAILURE_LABELS:
         vals = [100 * fb[s][label] for s in splits]
@@ -46,13 +47,13 @@ def plot_failures(name: str, records: list[dict], out: Path) -> Path:
     ax.set_title(f"Failure modes: {name}")
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.savefig(out, dpi=120, bbox_inches="tight")
-    plt.close(fig)
     return out
 
 
 def plot_sr_vs_distance(runs: list[tuple[str, list[dict]]], out: Path) -> Path:
     labels = [distance_bin(lo) for lo in DISTANCE_BINS[:-1]]
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
     for name, recs in runs:
         table = sr_by(recs, lambda r: distance_bin(float(r["geodesic_distance"])))
         for split in _ordered(table):
@@ -64,14 +65,14 @@ def plot_sr_vs_distance(runs: list[tuple[str, list[dict]]], out: Path) -> Path:
     ax.tick_params(axis="x", labelrotation=30)
     ax.legend(fontsize=7)
     fig.savefig(out, dpi=120, bbox_inches="tight")
-    plt.close(fig)
     return out
 
 
 def plot_sr_per_category(name: str, records: list[dict], out: Path, top: int = 40) -> Path:
     table = sr_by(records, lambda r: r["category"])
     splits = _ordered(table)
-    fig, axes = plt.subplots(len(splits), 1, figsize=(10, 2.8 * len(splits)), squeeze=False)
+    fig = Figure(figsize=(10, 2.8 * len(splits)))
+    axes = fig.subplots(len(splits), 1, squeeze=False)
     for ax, split in zip(axes[:, 0], splits):
         items = sorted(table[split].items(), key=lambda kv: (-kv[1][1], kv[0]))[:top]
         ax.bar([k for k, _ in items], [100 * v[0] for _, v in items], color="#1f77b4")
@@ -79,5 +80,4 @@ def plot_sr_per_category(name: str, records: list[dict], out: Path, top: int = 4
         ax.set_ylim(0, 100)
         ax.tick_params(axis="x", labelrotation=70, labelsize=7)
     fig.savefig(out, dpi=110, bbox_inches="tight")
-    plt.close(fig)
     return out

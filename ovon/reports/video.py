@@ -28,7 +28,7 @@ class TopDown:
     def __init__(self, grid, viewpoints: np.ndarray, goal_boxes: list[tuple[np.ndarray, np.ndarray]], size: int):
         nav = grid.navigable
         img = np.full((*nav.shape, 3), 40, np.uint8)
-        img[getattr(grid, "free", nav)] = (90, 90, 90)
+        img[grid.free] = (90, 90, 90)
         img[nav] = (200, 200, 200)
         self.grid = grid
         self.scale = size / max(nav.shape)

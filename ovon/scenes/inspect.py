@@ -1,12 +1,12 @@
 """A scene at a glance: counts a person checks before trusting a scene (floors, rooms, categories, how
-many annotated objects survived label cleaning)."""
+many annotated objects survived label cleaning). The navigable area per floor comes from the simulator
+layer above (`ovon.sim.navsummary`); `print_summary` prints it when the summary holds it."""
 
 from __future__ import annotations
 
 from collections import Counter
+from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from ovon.scenes.model import Scene
 
@@ -45,27 +45,6 @@ def summarize(scene: Scene) -> dict[str, Any]:
     }
 
 
-def navigation_summary(scene: Scene, agent=None, nav=None) -> list[dict[str, Any]]:  # noqa: ANN001
-    """Per floor: navigable area, islands, and the area on islands where starts can be sampled."""
-    from ovon.config.dataset import StartConfig
-    from ovon.sim.navgrid import build_navigation
-
-    sn = build_navigation(scene, agent, nav)
-    min_r = StartConfig().min_island_radius
-    out = []
-    for g in sn.floors:
-        cell = g.cell_size * g.cell_size
-        big = g.island_radius >= min_r
-        out.append({
-            "floor": g.floor, "height": round(float(g.height), 3),
-            "navigable_m2": round(float(g.navigable.sum()) * cell, 2),
-            "islands": g.num_islands,
-            "start_area_m2": round(float(g.island_area[big].sum()), 2),
-            "narrow_removed_m2": round(float(getattr(g, "narrow", np.zeros(1, bool)).sum()) * cell, 2),
-        })  # fmt: skip
-    return out
-
-
 def print_summary(summary: dict[str, Any], console: Any = None, max_categories: int = 60) -> None:
     """Rich tables: overview, rooms, objects per category."""
     from rich.console import Console
@@ -98,7 +77,8 @@ def print_summary(summary: dict[str, Any], console: Any = None, max_categories: 
     for f in summary.get("navigation", []):
         over.add_row(f"floor {f['floor']} navigable", f"{f['navigable_m2']:.1f} m² at y={f['height']:.2f} in "
                      f"{f['islands']} islands; {f['start_area_m2']:.1f} m² on islands big enough for starts; "
-                     f"{f['narrow_removed_m2']:.1f} m² of strips too narrow to drive removed")
+                     f"{f['narrow_removed_m2']:.1f} m² of strips too narrow to drive removed"
+                     + (f" (from {Path(f['source']).name})" if f.get("source", "mesh") != "mesh" else ""))
     console.print(over)
 
     if summary["rooms"]:

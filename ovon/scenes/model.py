@@ -73,6 +73,7 @@ class Scene:
     semantic_colors: dict[int, tuple[int, int, int]] = field(default_factory=dict)  # id -> RGB
     source: str = ""  # path it was loaded from, or "procedural:<seed>"
     semantics_missing: str = ""  # non-empty for a bare mesh without annotations: which files are missing
+    navmesh: str = ""  # habitat navmesh beside the mesh (<id>.navmesh or <id>.basis.navmesh), "" when none
 
     def object_by_id(self, instance_id: int) -> ObjectInstance:
         for o in self.objects:

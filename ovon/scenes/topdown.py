@@ -74,11 +74,9 @@ def render_topdown(
 ) -> Path:
     """Write a PNG with one panel per floor (or only `floor`)."""
     import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection, PolyCollection
-    from matplotlib.patches import Patch
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend stays as it is
+    from matplotlib.patches import Patch, Rectangle
 
     heights = scene.floor_heights or [float(scene.mesh.vertices[:, 1].min())]
     floors = list(range(len(heights))) if floor is None else [floor]
@@ -86,12 +84,13 @@ def render_topdown(
         raise ValueError(f"floor {floor} does not exist; scene {scene.scene_id} has floors 0..{len(heights) - 1}")
     kept = [o for o in scene.objects if o.category]
     common = [c for c, _ in Counter(o.category for o in kept).most_common(legend_size)]
-    palette = [plt.get_cmap("tab20")(i) for i in range(20) if i not in (14, 15)]  # greys mean "other"
+    palette = [matplotlib.colormaps["tab20"](i) for i in range(20) if i not in (14, 15)]  # greys mean "other"
     cat_color = {c: palette[i % len(palette)] for i, c in enumerate(common)}
     other = (0.55, 0.55, 0.55, 1.0)
     mesh = scene.mesh
     n = len(floors)
-    fig, axes = plt.subplots(1, n, figsize=(7.5 * n + 2.0, 7.5), squeeze=False)
+    fig = Figure(figsize=(7.5 * n + 2.0, 7.5))
+    axes = fig.subplots(1, n, squeeze=False)
     for ax, fl in zip(axes[0], floors):
         h = heights[fl]
         top = heights[fl + 1] if fl + 1 < len(heights) else np.inf
@@ -106,7 +105,7 @@ def render_topdown(
             if r.floor != fl or r.bounds is None:
                 continue
             x0, z0, x1, z1 = r.bounds
-            ax.add_patch(plt.Rectangle((x0, z0), x1 - x0, z1 - z0, facecolor=_room_color(r.name), alpha=0.6, zorder=1))
+            ax.add_patch(Rectangle((x0, z0), x1 - x0, z1 - z0, facecolor=_room_color(r.name), alpha=0.6, zorder=1))
             ax.text(
                 (x0 + x1) / 2,
                 (z0 + z1) / 2,
@@ -148,5 +147,4 @@ def render_topdown(
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi)
-    plt.close(fig)
     return out

@@ -12,11 +12,13 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from ovon.sim.geodesic import DistanceField, distance_field, geodesic_distance
     from ovon.sim.navgrid import NavGrid, SceneNav, build_navigation
+    from ovon.sim.navmesh import load_navmesh
 
 _LAZY = {
     "NavGrid": "ovon.sim.navgrid",
     "SceneNav": "ovon.sim.navgrid",
     "build_navigation": "ovon.sim.navgrid",
+    "load_navmesh": "ovon.sim.navmesh",
     "DistanceField": "ovon.sim.geodesic",
     "distance_field": "ovon.sim.geodesic",
     "geodesic_distance": "ovon.sim.geodesic",
@@ -29,6 +31,7 @@ __all__ = [
     "build_navigation",
     "distance_field",
     "geodesic_distance",
+    "load_navmesh",
 ]
 
 

@@ -1,11 +1,12 @@
-"""Stretch-like agent kinematics on the navigability grid: the six actions of task.md, collisions,
+"""Stretch-like agent kinematics on the navigability grid: the six actions (docs/spec.md#actions), collisions,
 optional sliding, actuation noise, and odometry relative to the start pose.
 
 Collision model: forward motion is checked against the navigable (radius-eroded) grid by sampling the
 segment at half-cell steps (`ovon.sim.collision.free_prefix`, shared with the experts). Without sliding
 the agent stops at the last navigable sample before the obstacle (Habitat's `tryStepNoSliding` stops at
-the contact too); with sliding the remaining motion is projected onto the x or z axis, whichever
-progresses further (a grid approximation of sliding along the navmesh edge).
+the contact too); with sliding the agent ends at the navigable point nearest to the target among the
+cells it can reach around the move (`ovon.sim.collision.slide_point`, Detour's moveAlongSurface on the
+grid: the target projected onto the wall it hits).
 Either way the step reports `collided=True`.
 """
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from ovon.config.sim import AgentConfig
 from ovon.geometry import heading_vector, wrap_angle
-from ovon.sim.collision import forward_delta, free_prefix
+from ovon.sim.collision import forward_delta, free_prefix, slide_point
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState
 
@@ -91,13 +92,10 @@ class Kinematics:
     def _move(self, start: np.ndarray, dx: float, dz: float) -> tuple[np.ndarray, bool]:
         reached, free = self._free_prefix(start, dx, dz)
         if not free and self.cfg.allow_sliding:
-            rest = (start[0] + dx - reached[0], start[2] + dz - reached[2])
-            best = reached
-            for slide in ((rest[0], 0.0), (0.0, rest[1])):
-                cand, _ = self._free_prefix(reached, slide[0], slide[1])
-                if np.linalg.norm(cand - reached) > np.linalg.norm(best - reached):
-                    best = cand
-            reached = best
+            g = self.grid
+            px, pz = slide_point(self._navigable, float(g.origin[0]), float(g.origin[1]), float(g.cell_size),
+                                 float(start[0]), float(start[2]), dx, dz)
+            reached = np.array([px, start[1], pz], dtype=np.float64)
         out = reached
         r, c = self.grid.world_to_cell(out)
         h = float(self.grid.heights[r, c])
@@ -107,11 +105,21 @@ class Kinematics:
 
 
 class Odometry:
-    """Pose relative to the start (dx, dz in the start frame, dyaw), optionally with per-step noise that
-    accumulates like real wheel odometry drift; the true pose is never changed by it."""
+    """Pose relative to the start (forward, left, dyaw in the start frame); the true pose is never changed.
 
-    def __init__(self, noise: OdometryNoise | None = None):
+    `mode="bounded"` (the paper's model, arXiv 2409.14296 Sec. "noise"): every reading is the true relative
+    pose plus a fresh uniform error, so the error never exceeds the noise bounds. `mode="drift"`: dead
+    reckoning, each step's body-frame motion (forward, left, turn) plus the error is integrated along the
+    *estimated* heading, so heading error bends every later translation, as real wheel odometry drifts.
+    """
+
+    MODES = ("bounded", "drift")
+
+    def __init__(self, noise: OdometryNoise | None = None, mode: str = "bounded"):
+        if mode not in self.MODES:
+            raise ValueError(f"odometry mode {mode!r}: expected one of {', '.join(self.MODES)}")
         self.noise = noise
+        self.mode = mode
         self._start: AgentState | None = None
         self._prev_true: AgentState | None = None
         self._estimate = np.zeros(3)
@@ -134,13 +142,29 @@ class Odometry:
 
     def update(self, state: AgentState, rng: np.random.Generator | None = None) -> np.ndarray:
         assert self._prev_true is not None
-        true_now = self.relative(state)
-        true_prev = self.relative(self._prev_true)
-        step = true_now - true_prev
-        step[2] = wrap_angle(step[2])
-        if self.noise is not None and rng is not None and np.any(step != 0):
-            step = step + self.noise.sample(rng)
-        self._estimate = self._estimate + step
+        noisy = self.noise is not None and rng is not None
+        if self.mode == "bounded":
+            self._estimate = self.relative(state)
+            if noisy:
+                self._estimate = self._estimate + self.noise.sample(rng)
+        else:
+            self._estimate = self._dead_reckon(state, rng if noisy else None)
         self._estimate[2] = wrap_angle(self._estimate[2])
         self._prev_true = state.copy()
         return self._estimate.copy()
+
+    def _dead_reckon(self, state: AgentState, rng: np.random.Generator | None) -> np.ndarray:
+        """Integrate the true step, measured in the agent's previous body frame, along the estimated heading."""
+        prev = self._prev_true
+        d = state.position - prev.position
+        f = heading_vector(prev.yaw)
+        left = np.array([f[2], 0.0, -f[0]])
+        step = np.array([float(d @ f), float(d @ left), wrap_angle(state.yaw - prev.yaw)])
+        if rng is not None and np.any(step != 0):
+            step = step + self.noise.sample(rng)
+        est = self._estimate.copy()
+        c, s = math.cos(est[2]), math.sin(est[2])  # body frame -> start frame (forward, left)
+        est[0] += c * step[0] - s * step[1]
+        est[1] += s * step[0] + c * step[1]
+        est[2] += step[2]
+        return est

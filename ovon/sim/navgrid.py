@@ -1,7 +1,10 @@
 """Navigability grids computed from any triangle mesh (procedural house or real scan).
 
 Why a grid and not a navmesh: habitat-sim (Recast) is not installable here, and a 2D grid per floor
-gives collision checks, islands, snapping and fast-marching geodesics with plain numpy.
+gives collision checks, islands, snapping and fast-marching geodesics with plain numpy. A scene that has
+a habitat navmesh beside its mesh gets its grids from that navmesh instead (`nav.source`,
+`navmesh_navigation`, `ovon.sim.navmesh.raster`): the steps below are then replaced by rasterising the
+navmesh's walkable polygons (already eroded by habitat: no erosion, no drivable opening).
 
 Method (one pass over the triangles for each stage, compiled with numba):
 
@@ -37,7 +40,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import math
-import os
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,11 +48,13 @@ import numpy as np
 from numba import njit
 from scipy import ndimage
 
+from ovon.atomic import atomic_write_with
 from ovon.config.sim import AgentConfig, NavConfig
 from ovon.scenes.model import Scene
+from ovon.sim.gridframe import grid_frame as _grid_frame
+from ovon.sim.gridframe import hint_bands
 from ovon.sim.los import los_between
 
-DEFAULT_MAX_SLOPE_DEG = 30.0  # used when NavConfig has no `max_slope_deg`
 MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
 MIN_COVERED_FRACTION = 0.5  # no-hint mode: a floor has a ceiling over most of it; roofs do not
 ELEVATED_M = 0.3  # islands whose median surface is this far above the floor are furniture tops
@@ -394,6 +398,7 @@ class SceneNav:
     agent: AgentConfig
     nav: NavConfig
     key: str = ""
+    source: str = "mesh"  # "mesh" (computed from the triangles) or the path of the navmesh it was read from
 
     @property
     def floor_heights(self) -> list[float]:
@@ -465,15 +470,7 @@ def _floor_bands(
     """(nominal height, lo, hi) per floor: bands around hints, else clusters of free candidate heights."""
     sep = nav.floor_separation
     if hints:
-        fh = sorted(float(h) for h in hints)
-        bands = []
-        for i, h in enumerate(fh):
-            lo = h - sep if i == 0 else max(h - sep / 2.0, bands[-1][2])
-            hi = h + 2.0 * sep
-            if i + 1 < len(fh):
-                hi = min(hi, fh[i + 1] - sep / 2.0)
-            bands.append((h, lo, hi))
-        return bands
+        return hint_bands(hints, sep)
     cand = s.walk & ~s.blocked
     cov = np.zeros(len(s.ys), dtype=np.bool_)
     _covered(s.ptr, s.ys, s.walk, s.blocked, agent.height, cov)
@@ -560,6 +557,16 @@ def _grid(floor: int, height: float, origin: np.ndarray, cs: float, free: np.nda
                    island_height=_island_heights(islands, heights, len(area)), narrow=narrow)
 
 
+def _surface_grid(floor: int, height: float, origin: np.ndarray, cs: float, navigable: np.ndarray, free: np.ndarray,
+                 heights: np.ndarray) -> NavGrid:
+    """A floor whose navigable cells are given as they are (a navmesh, eroded already: no second radius
+    erosion and no drivable opening)."""
+    islands, area, radius = _islands(navigable, origin, cs)
+    return NavGrid(floor=floor, height=float(height), origin=origin.copy(), cell_size=cs, navigable=navigable,
+                   free=free, heights=heights, islands=islands, island_area=area, island_radius=radius,
+                   island_height=_island_heights(islands, heights, len(area)), narrow=np.zeros_like(navigable))
+
+
 def _make_grid(
     floor: int,
     height: float,
@@ -585,17 +592,6 @@ def _make_grid(
     return _grid(floor, height, origin, cs, free, heights, agent)
 
 
-def _grid_frame(V: np.ndarray, cs: float) -> tuple[np.ndarray, int, int]:
-    """Origin so that cell centres are multiples of cs, with one empty cell of padding on each side."""
-    lo = V[:, [0, 2]].min(axis=0)
-    hi = V[:, [0, 2]].max(axis=0)
-    first = np.floor(lo / cs) - 1  # index (in multiples of cs) of the first cell centre
-    last = np.ceil(hi / cs) + 1
-    origin = (first - 0.5) * cs
-    cols, rows = (last - first + 1).astype(int)
-    return origin, int(rows), int(cols)
-
-
 def compute_navigation(
     vertices: np.ndarray,
     faces: np.ndarray,
@@ -610,7 +606,7 @@ def compute_navigation(
     if len(F) == 0:
         return []
     origin, rows, cols = _grid_frame(V, cs)
-    slope = float(getattr(nav, "max_slope_deg", DEFAULT_MAX_SLOPE_DEG))
+    slope = float(nav.max_slope_deg)
     s = _rasterise(V, F, origin, cs, rows, cols, agent, slope)
     grids = []
     for i, (nominal, lo, hi) in enumerate(_floor_bands(s, list(floor_heights or []), agent, nav, cs)):
@@ -637,57 +633,103 @@ def _cache_key(scene: Scene, agent: AgentConfig, nav: NavConfig) -> str:
 
 
 def _save(path: Path, grids: list[NavGrid]) -> None:
-    arrays: dict[str, np.ndarray] = {}
+    """Write the grids through `ovon.atomic` (a unique temp name, then rename): two processes building the
+    same scene each write a whole file, and a reader sees a whole file or none. A failed write (disk
+    full, read-only folder) only loses the saving: the cache is an optimisation."""
+    arrays: dict[str, np.ndarray] = {"n": np.array(len(grids))}
     for i, g in enumerate(grids):
         arrays[f"meta{i}"] = np.array([g.height, g.origin[0], g.origin[1], g.cell_size])
         arrays[f"free{i}"] = g.free
         arrays[f"heights{i}"] = g.heights
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, n=np.array(len(grids)), **arrays)
-    os.replace(tmp, path)
+    try:
+        atomic_write_with(path, lambda f: np.savez_compressed(f, **arrays))
+    except OSError:
+        pass
 
 
-def _load(path: Path, agent: AgentConfig) -> list[NavGrid]:
-    grids = []
-    with np.load(path) as z:
-        for i in range(int(z["n"])):
-            h, ox, oz, cs = z[f"meta{i}"]
-            free, heights = z[f"free{i}"], z[f"heights{i}"]
-            grids.append(_grid(i, float(h), np.array([ox, oz]), float(cs), free, heights, agent))
-    return grids
+def _load(path: Path, agent: AgentConfig) -> list[NavGrid] | None:
+    """The cached grids, or None (a miss) when the file is absent or cannot be used for any reason: torn
+    by a kill (BadZipFile, EOFError), truncated, other keys or shapes, a disk error. The caller then
+    rebuilds and replaces it, so a bad file never breaks a scene for good."""
+    if not path.is_file():
+        return None
+    try:
+        grids = []
+        with np.load(path, allow_pickle=False) as z:
+            for i in range(int(z["n"])):
+                h, ox, oz, cs = z[f"meta{i}"]
+                free, heights = z[f"free{i}"], z[f"heights{i}"]
+                grids.append(_grid(i, float(h), np.array([ox, oz]), float(cs), free, heights, agent))
+        return grids
+    except Exception:  # noqa: BLE001 - whatever is wrong with a cache file, the answer is to rebuild it
+        return None
 
 
-def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavConfig | None = None) -> SceneNav:
-    """Navigation grids of a scene, cached in-process by mesh content + params (and on disk when the
-    environment variable OVON_CACHE_DIR names a folder)."""
+def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavConfig | None = None,
+                     cache_dir: str | Path | None = None) -> SceneNav:
+    """Navigation grids of a scene, cached in-process by mesh content + params, and on disk in
+    `cache_dir` (`nav_<key>.npz`) when given: `ovon dataset generate` passes `<out>/.cache/nav`, so its
+    two phases and a resumed run compute each scene's grids once.
+
+    `nav.source` picks where navigability comes from: the habitat navmesh beside the mesh
+    (`Scene.navmesh`, read by `ovon.sim.navmesh.load_navmesh`), the mesh itself, or (auto) the navmesh
+    when the scene has one."""
     agent = agent or AgentConfig()
     nav = nav or NavConfig()
+    source = nav.source
+    if source == "navmesh" and not scene.navmesh:
+        raise ValueError(
+            f"sim.nav.source=navmesh but scene {scene.scene_id} has no habitat navmesh (<id>.navmesh or "
+            f"<id>.basis.navmesh beside its mesh {scene.source or '(in memory)'}); put one there or use "
+            "--set sim.nav.source=mesh (or auto) to compute navigability from the mesh"
+        )
+    if source != "mesh" and scene.navmesh:
+        bounds = scene.mesh.bounds() if scene.mesh.num_faces else None
+        return navmesh_navigation(scene.navmesh, agent, nav, scene.floor_heights, bounds, scene.source)
     key = _cache_key(scene, agent, nav)
     hit = _CACHE.get(key)
     if hit is not None:
         _CACHE.move_to_end(key)
         return hit
-    grids = None
-    cache_dir = os.environ.get("OVON_CACHE_DIR")
-    path = Path(cache_dir) / f"nav_{key}.npz" if cache_dir else None
-    if path is not None and path.exists():
-        try:
-            grids = _load(path, agent)
-        except (OSError, KeyError, ValueError):
-            grids = None
+    path = Path(cache_dir) / f"nav_{key}.npz" if cache_dir is not None else None
+    grids = _load(path, agent) if path is not None else None
     if grids is None:
         grids = compute_navigation(scene.mesh.vertices, scene.mesh.faces, scene.floor_heights, agent, nav)
         if path is not None:
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                _save(path, grids)
-            except OSError:
-                pass
+            _save(path, grids)
     result = SceneNav(floors=grids, agent=agent, nav=nav, key=key)
     _CACHE[key] = result
     while len(_CACHE) > _CACHE_SIZE:
         _CACHE.popitem(last=False)
     return result
+
+
+def navmesh_navigation(path: str | Path, agent: AgentConfig | None = None, nav: NavConfig | None = None,
+                       floor_heights: list[float] | None = None, bounds: tuple[np.ndarray, np.ndarray] | None = None,
+                       mesh_name: str = "") -> SceneNav:
+    """Navigation grids read from a habitat navmesh (`ovon.sim.navmesh.raster`: eroded already, so no
+    second radius erosion and no drivable opening), cached in-process by file content + params. With the
+    scene's mesh `bounds`, a navmesh lying outside the mesh is refused."""
+    from ovon.sim.navmesh.format import navmesh_file_bytes
+    from ovon.sim.navmesh.raster import check_inside, floors_from_bytes, navmesh_key
+
+    agent = agent or AgentConfig()
+    nav = nav or NavConfig()
+    data = navmesh_file_bytes(path)
+    key = navmesh_key(data, nav, floor_heights)
+    hit = _CACHE.get(key)
+    if hit is None or hit.agent != agent:
+        floors = floors_from_bytes(data, str(path), nav, floor_heights, agent.radius)
+        grids = [_surface_grid(f.floor, f.height, f.origin, f.cell_size, f.navigable, f.free, f.heights)
+                 for f in floors]
+        hit = SceneNav(floors=grids, agent=agent, nav=nav, key=key, source=str(path))
+        _CACHE[key] = hit
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    _CACHE.move_to_end(key)
+    if bounds is not None:
+        check_inside(hit.floors, bounds, str(path), mesh_name)
+    return hit
 
 
 def clear_cache() -> None:

@@ -1,4 +1,4 @@
-"""Actuation and odometry noise (task.md). Noise perturbs what happens or what is sensed, never the
+"""Actuation and odometry noise (docs/spec.md#noise). Noise perturbs what happens or what is sensed, never the
 ground-truth bookkeeping: callers keep the true pose and compute metrics from it.
 
 Presets: habitat-sim's published PyRobot LoCoBot tables (means and *variances* of forward/lateral

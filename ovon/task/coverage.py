@@ -18,8 +18,7 @@ from ovon.maps.visibility import ExploredMap
 class Coverage:
     def __init__(self, grid, fov_deg: float, range_m: float) -> None:
         self.grid = grid
-        free = grid.free if getattr(grid, "free", None) is not None else grid.navigable
-        self.map = ExploredMap(free | grid.navigable, grid.navigable, grid.cell_size, fov_deg, range_m)
+        self.map = ExploredMap(grid.free | grid.navigable, grid.navigable, grid.cell_size, fov_deg, range_m)
         self.cell_area = float(grid.cell_size) ** 2
 
     def _see(self, position, yaw: float) -> float:

@@ -1,5 +1,6 @@
 """One episode's ground-truth bookkeeping: distance to goal, path length, collisions, success, SPL,
-SoftSPL and the failure label (task.md). Everything here uses the *true* pose, never noisy sensors.
+SoftSPL and the failure label (docs/spec.md#metrics, #failure-labels). Everything here uses the *true*
+pose, never noisy sensors.
 """
 
 from __future__ import annotations
@@ -84,6 +85,7 @@ class EpisodeTracker:
         self.entered_region = self.in_region
         self.left_region = False
         self.seen_ids: set[int] = set()
+        self.in_view_ids: frozenset[int] = frozenset()  # seen (threshold) in the latest frame
         self._goal_id_array = np.array(sorted(self.goal_ids), dtype=np.int64)
         if semantic is not None:
             self._observe(semantic)
@@ -97,7 +99,8 @@ class EpisodeTracker:
         counts = np.bincount(flat[flat > 0], minlength=1)
         need = self.cfg.seen_fraction * flat.size
         ids = np.nonzero(counts >= need)[0]
-        self.seen_ids.update(int(i) for i in ids)
+        self.in_view_ids = frozenset(int(i) for i in ids)
+        self.seen_ids.update(self.in_view_ids)
         if not self.goal_seen and len(self._goal_id_array):
             g = self._goal_id_array[self._goal_id_array < len(counts)]
             if counts[g].sum() >= need:
@@ -135,7 +138,7 @@ class EpisodeTracker:
         return self.called_stop and self.distance < self.cfg.success_distance
 
     def reward(self) -> float:
-        """Reward of the last step (task.md): dense shaping or the sparse fine-tuning reward."""
+        """Reward of the last step (docs/spec.md#rewards): dense shaping or the sparse fine-tuning reward."""
         r = self.cfg.reward
         if r.kind == "dense":
             if self.success:
@@ -160,8 +163,10 @@ class EpisodeTracker:
             if self.goal_seen or self.entered_region:
                 return "timeout_ignored_goal"
             return "timeout_missed_goal"
+        # Only an object in view at the STOP counts (last frame, seen threshold): one glimpsed earlier
+        # next to the stop says nothing about why the agent stopped.
         for d in self.distractors:
-            if d.instance_id in self.seen_ids and d.floor_distance(self.position) <= self.cfg.wrong_object_distance:
+            if d.instance_id in self.in_view_ids and d.floor_distance(self.position) <= self.cfg.wrong_object_distance:
                 return "stop_wrong_object"
         if self.left_region:
             return "stop_left_goal"

@@ -1,6 +1,6 @@
 """Training configs: one dataclass tree for BC, DAgger and PPO (+ BC->RL / DAgger->RL fine-tuning).
 
-Why one tree: every number of baselines.md is a config value reachable from YAML or `--set key=value`
+Why one tree: every number of docs/spec.md#baselines is a config value reachable from YAML or `--set key=value`
 (`ovon.config.base.build`), and a checkpoint stores the whole tree so `--resume` and the policy agent
 rebuild exactly what was trained. Presets: `paper` (upstream hyperparameters), `cpu-small` (learns on
 a 2-core CPU in tens of minutes), `tiny` (tests: seconds).
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 from ovon.config.base import Pattern, constrained, in_range, less, non_negative, positive
 from ovon.config.sim import CameraConfig, SimConfig
@@ -38,11 +38,16 @@ class PPOConfig:
     # policy that is evaluated at temperature 0.5 (README) should be trained at 0.5 too: at 1 its rollouts
     # rarely succeed, the sparse reward gives no signal and the policy drifts away from what worked.
     temperature: float = positive(1.0)
+    # A transformer acts with a sliding window of `policy.context` steps that crosses rollout chunks; the
+    # update re-reads each chunk with the `context - 1` steps before it (no loss on them), so the logits it
+    # optimises are the ones the actions were sampled from. false: the chunk alone (shorter context for
+    # episodes that began before it; the update then optimises another policy than the one that acted).
+    context_prefix: bool = True
 
 
 @dataclass(frozen=True)
 class FinetuneConfig:
-    """BC->RL / DAgger->RL schedule (baselines.md), in updates; `scale` stretches or shrinks it.
+    """BC->RL / DAgger->RL schedule (docs/spec.md#fine-tune-schedule), in updates; `scale` stretches or shrinks it.
 
     critic lr: `critic_lr` until `critic_decay_start`, then linear to `critic_lr_final` at
     `critic_decay_end`. actor (+ core + input projection) lr: 0 until `actor_unfreeze`, then linear
@@ -59,7 +64,16 @@ class FinetuneConfig:
     freeze_prev_action: bool = True
     reinit_critic: bool = True
     reward: Literal["sparse", "dense"] = "sparse"
-    scale: float = positive(1.0)  # multiplies every update number above
+    scale: float = positive(1.0)  # multiplies every update number above and below
+    # What keeps the imitation policy while RL takes over (kickstarting / DAPG): a loss term
+    # anchor_coef x (cross-entropy to the expert's online labels | KL(initial policy || policy)),
+    # its weight decaying linearly to 0 over `anchor_decay_updates` (0: constant).
+    anchor: Literal["none", "expert", "kl"] = "none"
+    anchor_coef: float = non_negative(1.0)
+    anchor_decay_updates: int = non_negative(0)
+    # The actor stays frozen (beyond `actor_unfreeze`) until the critic's explained variance on a
+    # rollout reaches this; once reached the gate stays open. 0: no gate.
+    critic_warmup_ev: float = in_range(0.0, 0.0, 1.0, hi_open=True)
     rules: ClassVar = (less("critic_decay_start", "critic_decay_end", strict=False),
                        less("actor_unfreeze", "actor_warmup_end", strict=False))
 
@@ -223,6 +237,24 @@ def train_preset(name: str, **changes: object) -> TrainConfig:
     return dataclasses.replace(PRESETS[name](), **changes)
 
 
+def build_config(options: Any) -> TrainConfig:
+    """The `TrainConfig` of `ovon train`'s options (`algo`, `preset`, `expert`, `policy`, `encoder`, `config`,
+    `set`; an argparse namespace or any object with them): the preset, the named choices, then the YAML file
+    and `key=value` overrides, each validated. One function, so `ovon train` and the experiment runner's
+    check of a training cell build the same config from the same command line."""
+    from ovon.config.base import build
+
+    changes: dict = {"algo": options.algo}
+    if options.expert:
+        changes["expert"] = options.expert
+    preset = train_preset(options.preset, **changes)
+    if options.policy:
+        preset = dataclasses.replace(preset, policy=dataclasses.replace(preset.policy, core=options.policy))
+    if options.encoder:
+        preset = dataclasses.replace(preset, encoder=dataclasses.replace(preset.encoder, image=options.encoder))
+    return build(type(preset), preset, options.config, options.set)
+
+
 def reward_for(cfg: TrainConfig, finetune: bool) -> TaskConfig:
     """Task config with the reward kind the algorithm uses (dense for RL, sparse when fine-tuning)."""
     kind = cfg.finetune.reward if finetune else "dense"
@@ -237,6 +269,7 @@ __all__ = [
     "PRESETS",
     "RewardConfig",
     "TrainConfig",
+    "build_config",
     "reward_for",
     "train_preset",
 ]

@@ -1,5 +1,5 @@
 """DAgger: the student's sampled action drives the env, the expert labels every visited state online,
-and the policy is trained with cross-entropy on those labels (baselines.md; upstream: beta = 0).
+and the policy is trained with cross-entropy on those labels (docs/spec.md#training-algorithms; upstream: beta = 0).
 
 Upstream trains on-policy: every update collects `rollout_steps` steps in each env and takes one
 gradient step on those (num_envs x rollout_steps) chunks. `dagger.buffer_rollouts` > 1 aggregates the
@@ -22,7 +22,8 @@ import torch
 
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.batches import cat_images, episode_summary, features, imitation_loss, map_images, stack_images
+from ovon.train.batches import cat_images, episode_summary, features, imitation_loss, map_images
+from ovon.train.collect import RolloutCollector
 from ovon.train.config import TrainConfig, reward_for
 from ovon.train.run import TrainRun, num_updates
 
@@ -46,8 +47,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
     pool = ThreadPoolExecutor(1, thread_name_prefix="dagger-learn") if overlap else None
     try:
         envs, batch = run.open_envs(specs, reward_for(cfg, False), label=True)
-        policy = run.build_policy(int(batch.image.shape[-1]) if isinstance(batch.image, torch.Tensor) else 0,
-                                  int(batch.goal.shape[-1]))
+        policy = run.policy_for(batch)
         model = dist.wrap(policy, run.info)
         optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
         # With overlap the student acts with its own copy (the weights of the update before last) and the
@@ -55,14 +55,12 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
         actor = copy.deepcopy(policy) if overlap else policy
         learn_rng = torch.Generator().manual_seed(cfg.seed * 7919 + 1) if overlap else None
         n_envs, T = cfg.num_envs, cfg.rollout_steps
-        act_state = policy.init_state(n_envs, dev)
-        prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
+        collector = RolloutCollector(envs, batch, policy, dev)
         buffer: list[tuple] = []  # aggregated labelled rollouts (cfg.dagger.buffer_rollouts most recent)
         saved = run.restore(optimizer)
         if saved is not None:
-            act_state, prev_action = saved["act_state"], saved["prev_action"].to(dev)
+            collector.restore(saved)
             buffer = list(saved.get("buffer", []))
-            batch = envs.set_state(saved["env"])
             if overlap:
                 actor.load_state_dict(saved["actor"])
                 learn_rng.set_state(saved["learn_rng"])
@@ -112,32 +110,22 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
         for update in range(run.start_update, total):
             t0 = time.perf_counter()
             beta = beta_at(cfg, update)
-            images, goals, prevs, starts, labels, finished = [], [], [], [], [], []
+
+            def choose(logits: torch.Tensor, b, beta: float = beta):
+                """The student's sample; with probability beta the expert's label instead."""
+                action = actor.distribution(logits).sample()
+                if beta > 0:
+                    use_expert = torch.rand(n_envs, device=dev) < beta
+                    action = torch.where(use_expert, b.label.to(dev), action)
+                return action, None
+
             # ---- rollout: the student acts, the expert labels -------------------------------------
-            actor.eval()
             with run.acting():
-                for _ in range(T):
-                    b = batch
-                    with torch.no_grad():
-                        obs = actor.make_obs(features(actor, map_images(b.image, lambda x: x.to(dev))),
-                                             b.goal.to(dev))
-                        logits, _, act_state = actor.act_step(obs, prev_action, act_state, b.first.to(dev))
-                        action = actor.distribution(logits).sample()
-                        if beta > 0:
-                            use_expert = torch.rand(n_envs, device=dev) < beta
-                            action = torch.where(use_expert, b.label.to(dev), action)
-                    images.append(b.image)
-                    goals.append(b.goal)
-                    prevs.append(prev_action.cpu())
-                    starts.append(b.first)
-                    labels.append(b.label)
-                    batch = envs.step(action.cpu())
-                    prev_action = torch.where(batch.first.to(dev), torch.full_like(action, -1), action)
-                    finished += batch.metrics
+                ro = collector.collect(actor, T, choose)
             t1 = time.perf_counter()
-            buffer.append((_compact(stack_images(images, 1)), torch.stack(goals, 1), torch.stack(prevs, 1),
-                           torch.stack(starts, 1), torch.stack(labels, 1)))
+            buffer.append((_compact(ro.images), ro.goals, ro.prevs, ro.starts, ro.labels))
             del buffer[: max(0, len(buffer) - cfg.dagger.buffer_rollouts)]
+            finished = ro.finished
             run.step += n_envs * T * run.info.world_size
             record = {"beta": beta, "finished": finished, "rollout_s": t1 - t0, "step": run.step}
             # ---- learn: now, or (overlap) in the thread while the next rollout runs ---------------------
@@ -163,8 +151,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 record["wall_s"] = time.perf_counter() - t0
                 finish(update, learned, record)
             if checkpoint:
-                state = {"env": envs.get_state(), "act_state": act_state, "prev_action": prev_action.cpu(),
-                         "buffer": buffer}
+                state = {**collector.state(), "buffer": buffer}
                 if overlap:
                     state |= {"actor": actor.state_dict(), "learn_rng": learn_rng.get_state()}
                 run.save(update + 1, optimizer, state)

@@ -1,19 +1,24 @@
 """PPO with the dense reward (RL from scratch), or - with `--init CKPT` - BC->RL / DAgger->RL
-fine-tuning: re-initialised critic, sparse reward, and the fine-tune schedule of baselines.md.
+fine-tuning: re-initialised critic, sparse reward, and the fine-tune schedule of docs/spec.md#fine-tune-schedule.
 
 Fine-tune schedule (updates, all multiplied by `finetune.scale`): critic lr `critic_lr` until
 `critic_decay_start`, then linear to `critic_lr_final` at `critic_decay_end`; actor + core + input
-projection frozen (lr 0) until `actor_unfreeze`, then linear warm-up from 0 to `actor_lr` at
-`actor_warmup_end`; the prev-action embedding is frozen throughout.
+projection frozen (lr 0) until `actor_unfreeze` (and, with `critic_warmup_ev`, until the critic
+explains that much of the returns' variance), then linear warm-up from 0 to `actor_lr` at
+`actor_warmup_end`; the prev-action embedding is frozen throughout. `finetune.anchor` adds a decaying
+term that keeps the imitation policy: cross-entropy to the expert's online labels, or KL to the frozen
+initial policy.
 
-Sequences: each update collects `rollout_steps` steps per env. Old log-probs and values are recomputed
-by one forward pass over the rollout chunk (the same context the update sees), so the first PPO ratio
-is exactly 1 even though acting used a longer sliding window. Minibatches split the envs, keeping
-whole sequences; an LSTM starts each chunk from its acting state at the chunk's start.
+Sequences: each update collects `rollout_steps` steps per env (`ovon.train.collect`). Old log-probs and
+values are recomputed by one forward pass over the rollout chunk (the same context the update sees);
+`behaviour_kl` logs how far that is from the log-probs the actions were sampled with (0 when acting and
+the update see the same context). Minibatches split the envs, keeping whole sequences; an LSTM starts
+each chunk from its acting state at the chunk's start.
 """
 
 from __future__ import annotations
 
+import copy
 import time
 from pathlib import Path
 
@@ -21,7 +26,8 @@ import torch
 
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.batches import episode_summary, features, map_images, stack_images
+from ovon.train.batches import episode_summary, features, imitation_loss, map_images
+from ovon.train.collect import RolloutCollector, explained_variance, gae
 from ovon.train.config import FinetuneConfig, TrainConfig, reward_for
 from ovon.train.run import TrainRun, num_updates
 
@@ -43,15 +49,23 @@ def finetune_lrs(ft: FinetuneConfig, update: int) -> tuple[float, float]:
     return critic, actor
 
 
-def _clone_state(state):
-    """Detached copy of an LSTM (h, c) acting state (the transformer needs none: chunks carry starts)."""
-    if isinstance(state, tuple):
-        return tuple(s.detach().clone() for s in state)
-    return None
-
-
 def _index_state(state, idx: torch.Tensor):
     return None if state is None else tuple(s[:, idx] for s in state)
+
+
+def anchor_weight(ft: FinetuneConfig, update: int) -> float:
+    """Weight of the imitation anchor at `update` (0-based): anchor_coef decaying linearly to 0."""
+    if ft.anchor == "none":
+        return 0.0
+    if ft.anchor_decay_updates <= 0:
+        return ft.anchor_coef
+    return ft.anchor_coef * max(0.0, 1.0 - update / (ft.anchor_decay_updates * ft.scale))
+
+
+def kl_to(ref_logits: torch.Tensor, logits: torch.Tensor) -> torch.Tensor:
+    """Mean KL(softmax(ref) || softmax(logits)) over the leading dims."""
+    ref = torch.log_softmax(ref_logits, -1)
+    return (ref.exp() * (ref - torch.log_softmax(logits, -1))).sum(-1).mean()
 
 
 def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
@@ -60,102 +74,95 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
     finetune = init is not None
     algo = "ppo-finetune" if finetune else "ppo"
     run = TrainRun(cfg, out_dir, algo, init=init, resume=resume)
-    cfg, dev, pc = run.cfg, run.device, run.cfg.ppo
+    cfg, dev, pc, ft = run.cfg, run.device, run.cfg.ppo, run.cfg.finetune
+    anchor = ft.anchor if finetune else "none"
     try:
-        envs, batch = run.open_envs(specs, reward_for(cfg, finetune), label=False)
-        policy = run.build_policy(int(batch.image.shape[-1]) if isinstance(batch.image, torch.Tensor) else 0,
-                                  int(batch.goal.shape[-1]))
+        envs, batch = run.open_envs(specs, reward_for(cfg, finetune), label=anchor == "expert")
+        policy = run.policy_for(batch)
+        reference = None
         if finetune:
-            if cfg.finetune.reinit_critic:
+            if anchor == "kl":  # the initial policy, frozen, before the critic is re-initialised
+                reference = copy.deepcopy(policy).eval().requires_grad_(False)
+            if ft.reinit_critic:
                 policy.reinit_critic()
             groups = policy.parameter_groups()
-            if cfg.finetune.freeze_prev_action:
+            if ft.freeze_prev_action:
                 for p in groups["prev_action"]:
                     p.requires_grad_(False)
-            critic_lr, actor_lr = finetune_lrs(cfg.finetune, 0)
+            critic_lr, actor_lr = finetune_lrs(ft, 0)
             param_groups = [{"params": groups["critic"], "lr": critic_lr, "name": "critic"},
                             {"params": groups["actor"], "lr": actor_lr, "name": "actor"}]
-            if not cfg.finetune.freeze_prev_action and groups["prev_action"]:
+            if not ft.freeze_prev_action and groups["prev_action"]:
                 param_groups.append({"params": groups["prev_action"], "lr": actor_lr, "name": "prev_action"})
             optimizer = torch.optim.Adam(param_groups, eps=cfg.adam_eps)
         else:
             optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
         model = dist.wrap(policy, run.info)
         n_envs, T = cfg.num_envs, cfg.rollout_steps
-        act_state = policy.init_state(n_envs, dev)
-        prev_action = torch.full((n_envs,), -1, dtype=torch.long, device=dev)
+        prefix = policy.cfg.context - 1 if policy.cfg.core == "transformer" and pc.context_prefix else 0
+        collector = RolloutCollector(envs, batch, policy, dev, prefix=prefix)
+        gate_open = ft.critic_warmup_ev <= 0  # the explained-variance gate of the actor (latched)
         saved = run.restore(optimizer)
         if saved is not None:
-            act_state, prev_action = saved["act_state"], saved["prev_action"].to(dev)
-            batch = envs.set_state(saved["env"])
+            collector.restore(saved)
+            gate_open = saved.get("actor_gate_open", gate_open)
             run.restore_rng(saved)
         total = num_updates(cfg, run.info.world_size)
         run.open_logger(total)
         trainable = [p for p in policy.parameters() if p.requires_grad]
+
+        def choose(logits: torch.Tensor, b) -> tuple[torch.Tensor, torch.Tensor]:
+            d = policy.distribution(logits / pc.temperature)
+            action = d.sample()
+            return action, d.log_prob(action)
+
         last: dict = {}
         for update in range(run.start_update, total):
             t0 = time.perf_counter()
             if finetune:
-                lrs = finetune_lrs(cfg.finetune, update)
+                lrs = finetune_lrs(ft, update)
                 for g in optimizer.param_groups:
-                    g["lr"] = lrs[0] if g["name"] == "critic" else lrs[1]
-            state0 = _clone_state(act_state)
-            images, goals, prevs, starts, actions, rewards, dones, finished = [], [], [], [], [], [], [], []
+                    g["lr"] = lrs[0] if g["name"] == "critic" else (lrs[1] if gate_open else 0.0)
             # ---- rollout ----------------------------------------------------------------------
-            policy.eval()
             with run.acting():
-                for t in range(T + 1):
-                    b = batch
-                    images.append(b.image)
-                    goals.append(b.goal)
-                    prevs.append(prev_action.cpu())
-                    starts.append(b.first)
-                    if t == T:  # the bootstrap observation: value only, no action
-                        break
-                    with torch.no_grad():
-                        obs = policy.make_obs(features(policy, map_images(b.image, lambda x: x.to(dev))),
-                                              b.goal.to(dev))
-                        logits, _, act_state = policy.act_step(obs, prev_action, act_state, b.first.to(dev))
-                        action = policy.distribution(logits / pc.temperature).sample()
-                    actions.append(action.cpu())
-                    batch = envs.step(action.cpu())
-                    rewards.append(batch.reward)
-                    dones.append(batch.done)
-                    prev_action = torch.where(batch.first.to(dev), torch.full_like(action, -1), action)
-                    finished += batch.metrics
+                ro = collector.collect(policy, T, choose, bootstrap=True)
             t1 = time.perf_counter()
-            # ---- advantages (GAE) from one forward over the chunk --------------------------------
-            img = map_images(stack_images(images, 1), lambda x: x.to(dev))  # (N, T+1, ...)
-            goal_seq = torch.stack(goals, 1).to(dev)
-            prev_seq = torch.stack(prevs, 1).to(dev)
-            start_seq = torch.stack(starts, 1).to(dev)
-            act_seq = torch.stack(actions, 1).to(dev)
-            rew = torch.stack(rewards, 1).to(dev)
-            done = torch.stack(dones, 1).to(dev).float()
+            # ---- advantages (GAE) from one forward over [prefix +] chunk -------------------------
+            P = ro.prefix  # context steps before the chunk: read, never trained on
+            img = map_images(ro.images, lambda x: x.to(dev))  # (N, P + T + 1, ...)
+            goal_seq, prev_seq, start_seq = ro.goals.to(dev), ro.prevs.to(dev), ro.starts.to(dev)
+            act_seq, rew, state0 = ro.actions.to(dev), ro.rewards.to(dev), ro.state0
             with torch.no_grad():
                 obs = policy.make_obs(features(policy, img), goal_seq)
                 logits, values, _ = policy.forward_seq(obs, prev_seq, start_seq, state0)
+                logits, values = logits[:, P:], values[:, P:]
                 old_logp = policy.distribution(logits[:, :T] / pc.temperature).log_prob(act_seq)
-                adv = torch.zeros_like(rew)
-                gae = torch.zeros(n_envs, device=dev)
-                for t in reversed(range(T)):
-                    nonterminal = 1.0 - done[:, t]
-                    delta = rew[:, t] + pc.gamma * values[:, t + 1] * nonterminal - values[:, t]
-                    gae = delta + pc.gamma * pc.gae_lambda * nonterminal * gae
-                    adv[:, t] = gae
-                returns = adv + values[:, :T]
+                adv, returns = gae(rew, values, ro.dones.to(dev), pc.gamma, pc.gae_lambda)
+                ev = explained_variance(values[:, :T], returns)
+                log_ratio = old_logp - ro.behaviour_logp.to(dev)  # update vs acting, same weights
+                behaviour_kl = (log_ratio.exp() - 1 - log_ratio).mean().item()
+                ref_logits = None
+                if reference is not None:
+                    ref_obs = reference.make_obs(features(reference, img), goal_seq)
+                    ref_logits = reference.forward_seq(ref_obs, prev_seq, start_seq, state0)[0][:, P:P + T]
+            if not gate_open and ev >= ft.critic_warmup_ev:
+                gate_open = True
+            labels = ro.labels[:, :T].to(dev)
+            w_anchor = anchor_weight(ft, update) if finetune else 0.0
             # ---- PPO epochs over env minibatches ------------------------------------------------
             policy.train()
             n_mb = max(1, min(pc.minibatches, n_envs))
             stats: dict[str, list[float]] = {k: [] for k in ("loss", "policy_loss", "value_loss", "entropy",
-                                                             "approx_kl", "clipfrac", "grad_norm")}
+                                                             "approx_kl", "clipfrac", "grad_norm", "anchor_loss")}
             for _ in range(pc.epochs):
                 perm = torch.randperm(n_envs)
                 for mb in perm.chunk(n_mb):
                     mbd = mb.to(dev)
-                    mb_img = map_images(img, lambda x, i=mbd: x[i, :T])
-                    obs = policy.make_obs(features(policy, mb_img), goal_seq[mbd, :T])
-                    logits, v = model(obs, prev_seq[mbd, :T], start_seq[mbd, :T], _index_state(state0, mbd))
+                    mb_img = map_images(img, lambda x, i=mbd, n=P + T: x[i, :n])
+                    obs = policy.make_obs(features(policy, mb_img), goal_seq[mbd, :P + T])
+                    logits, v = model(obs, prev_seq[mbd, :P + T], start_seq[mbd, :P + T],
+                                      _index_state(state0, mbd))
+                    logits, v = logits[:, P:], v[:, P:]
                     d = policy.distribution(logits / pc.temperature)
                     logp = d.log_prob(act_seq[mbd])
                     ratio = (logp - old_logp[mbd]).exp()
@@ -166,6 +173,11 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                     v_loss = 0.5 * (v - returns[mbd]).pow(2).mean()
                     ent = d.entropy().mean()
                     loss = pg + pc.value_coef * v_loss - pc.entropy_coef * ent
+                    if w_anchor > 0:
+                        a_loss = (imitation_loss(logits, labels[mbd], cfg.stop_loss_weight) if anchor == "expert"
+                                  else kl_to(ref_logits[mbd], logits))
+                        loss = loss + w_anchor * a_loss
+                        stats["anchor_loss"].append(a_loss.item())
                     optimizer.zero_grad(set_to_none=True)
                     loss.backward()
                     gn = torch.nn.utils.clip_grad_norm_(trainable, cfg.max_grad_norm)
@@ -179,18 +191,20 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             t2 = time.perf_counter()
             run.step += n_envs * T * run.info.world_size
             scalars = {k: sum(v) / len(v) for k, v in stats.items() if v}
-            scalars.update({"reward/mean": rew.mean().item(), "time/rollout_s": t1 - t0, "time/learn_s": t2 - t1})
+            scalars.update({"reward/mean": rew.mean().item(), "time/rollout_s": t1 - t0, "time/learn_s": t2 - t1,
+                            "behaviour_kl": behaviour_kl, "explained_variance": ev})
+            if finetune:
+                scalars.update({"anchor/weight": w_anchor, "actor_gate_open": float(gate_open)})
             for g in optimizer.param_groups:
                 scalars[f"lr/{g.get('name', 'all')}"] = g["lr"]
             scalars = dist.all_reduce_mean(scalars, run.info)
-            eps = [m for part in dist.gather_objects(finished, run.info) for m in part]
+            eps = [m for part in dist.gather_objects(ro.finished, run.info) for m in part]
             if run.due(update + 1, total, cfg.log_every):
                 last = {**scalars, **episode_summary(eps),
                         "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
                 run.log(update + 1, last)
             if run.due(update + 1, total, cfg.checkpoint_every):
-                run.save(update + 1, optimizer, {"env": envs.get_state(), "act_state": act_state,
-                                                 "prev_action": prev_action.cpu()})
+                run.save(update + 1, optimizer, {**collector.state(), "actor_gate_open": gate_open})
         run.finish(total)
     finally:
         run.close()

@@ -86,6 +86,12 @@ class TrainRun:
         self.envs = TrainEnvs(recipe, mine, cfg.num_envs, cfg.env_workers, cfg.seed * 1000 + self.info.rank)
         return self.envs, self.envs.reset()
 
+    def policy_for(self, batch):
+        """`build_policy` with the image / goal dims of the envs' first batch."""
+        image = batch.image
+        return self.build_policy(int(image.shape[-1]) if isinstance(image, torch.Tensor) else 0,
+                                 int(batch.goal.shape[-1]))
+
     def build_policy(self, image_dim: int, text_dim: int):
         """The init policy (fine-tuning) or a new one, checked against the envs' dims, on this device."""
         from ovon.models.policy import build_policy

@@ -79,7 +79,8 @@ def env() -> dict:
 
 def build_world(work: Path) -> World:
     sys.path.insert(0, str(ROOT))
-    from ovon.dataset.generate import VAL_SPLITS, generate
+    from ovon.dataset.generate import generate
+    from ovon.dataset.io import VAL_SPLITS
     from tests.conftest import tiny_generation_config, write_tiny_scenes
 
     w = World(work)

@@ -1,4 +1,4 @@
-"""Configs of the modular agents (VLFM, DAgRL+OD): every number of baselines.md is a config value.
+"""Configs of the modular agents (VLFM, DAgRL+OD): every number of docs/spec.md#baselines is a config value.
 
 Built by `modular_config(cls, preset, overrides)`: a preset ("cpu", the default, or "paper"), then dotted
 overrides such as `detector.miss_rate=0.2` (from `--agent-arg detector.miss_rate=0.2`); a wrong key fails
@@ -94,7 +94,7 @@ class ModularConfig:
 
 @dataclass(frozen=True)
 class ValueMapConfig:
-    """Language value map and frontier choice (baselines.md, vlfm.md A.5-A.6)."""
+    """Language value map and frontier choice (docs/spec.md#value-map, #frontier-choice)."""
 
     scorer: ScorerConfig = field(default_factory=ScorerConfig)
     min_confidence: float = 0.25  # confidence at the edge of the view cone (1 on the optical axis)
@@ -141,7 +141,7 @@ def _positive(cfg: Any, group: str, names: tuple[str, ...]) -> None:
 
 
 def _paper(base: ModularConfig) -> dict[str, Any]:
-    """baselines.md "Modular baseline": obstacles 0.6-0.9 m above the floor, OWLv2, a neural image-text
+    """docs/spec.md#modular-baseline: obstacles 0.6-0.9 m above the floor, OWLv2, a neural image-text
     score (SigLIP here; the paper's VLFM used BLIP-2 ITC) with VLFM's prompt, masks eroded 5 times."""
     del base
     return {

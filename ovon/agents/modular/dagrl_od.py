@@ -1,4 +1,4 @@
-"""`--agent dagrl-od --checkpoint POLICY`: DAgRL+OD (baselines.md): the end-to-end policy explores until
+"""`--agent dagrl-od --checkpoint POLICY`: DAgRL+OD (docs/spec.md#dagrl-od): the end-to-end policy explores until
 the detector fires on the goal text; from then on the bee-lining module (the one VLFM uses) drives to the
 nearest lifted goal point and STOPs, for the rest of the episode.
 
@@ -40,7 +40,7 @@ class DAgRLODAgent:
             self.cfg.checkpoint, deterministic=self.cfg.deterministic, threads=self.cfg.threads,
             temperature=self.cfg.temperature,
         )
-        self.core = ModularCore(self.cfg, getattr(self.policy, "text", None))
+        self.core = ModularCore(self.cfg, self.policy.text)
         self.privileged = bool(self.policy.privileged) or self.core.privileged
         perception = "oracle perception" if self.policy.privileged else self.policy.encoder_cfg.image
         self.name = describe_dagrl_od(self.cfg, perception)
@@ -49,10 +49,16 @@ class DAgRLODAgent:
         self.step = 0
 
     @staticmethod
-    def describe(**kwargs: Any) -> str:
+    def resolved_config(**kwargs: Any) -> DAgRLODConfig:
+        """The config the constructor builds from these arguments, the checkpoint aside (the experiment
+        runner records it, so a preset changed in code makes a finished evaluation stale)."""
         kwargs.pop("checkpoint", None)
         preset = kwargs.pop("preset", "cpu")
-        return describe_dagrl_od(modular_config(DAgRLODConfig, preset, kwargs))
+        return modular_config(DAgRLODConfig, preset, kwargs)
+
+    @staticmethod
+    def describe(**kwargs: Any) -> str:
+        return describe_dagrl_od(DAgRLODAgent.resolved_config(**kwargs))
 
     def reset(self, episode_info: dict) -> None:
         self.policy.reset(episode_info)

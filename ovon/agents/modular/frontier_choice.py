@@ -1,4 +1,4 @@
-"""Frontier choice by value (baselines.md): the highest value wins; the previous frontier is kept unless
+"""Frontier choice by value (docs/spec.md#frontier-choice): the highest value wins; the previous frontier is kept unless
 another is better by more than `hysteresis`; a frontier abandoned from a spot is not picked again from that
 spot (anti-cycling; VLFM hashes the robot position, the frontier and the top values for the same purpose).
 

@@ -34,7 +34,7 @@ from ovon.experts.control import (
     lookahead_index,
     trace_parents,
 )
-from ovon.plugins import is_spec, load_class
+from ovon.plugins import load_named
 
 
 @dataclass
@@ -205,9 +205,9 @@ class GeometricNavigator:
         return self.steering.act(pose.position, pose.yaw, err)
 
 
+NAVIGATORS: dict[str, str] = {"geometric": "ovon.agents.modular.navigation:GeometricNavigator"}
+
+
 def make_navigator(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors) -> PointGoalNavigator:
-    if cfg.kind == "geometric":
-        return GeometricNavigator(cfg, maps, sensors)
-    if is_spec(cfg.kind):
-        return load_class(cfg.kind, "navigator.kind", "geometric or package.module:Class")(cfg, maps, sensors)
-    raise ValueError(f"navigator.kind = {cfg.kind!r} is unknown; use geometric or package.module:Class")
+    """The navigator `cfg.kind` names (built-ins and plug-ins alike get `(cfg, maps, sensors)`)."""
+    return load_named(cfg.kind, NAVIGATORS, "navigator.kind")(cfg, maps, sensors)

@@ -1,4 +1,4 @@
-"""Language value map (vlfm.md A.5): one image-text score per frame, spread over the cells the camera sees
+"""Language value map (docs/spec.md#value-map): one image-text score per frame, spread over the cells the camera sees
 now with a confidence that falls from 1 on the optical axis to `min_confidence` at the cone's edges
 (theta in [0, fov/2] rescaled to [0, pi/2], cos^2, remapped to [min_confidence, 1]), fused with the stored
 value by confidence-weighted averaging. The cone is the explored map's view cone (same range, same line of

@@ -1,4 +1,4 @@
-"""`--agent vlfm`: the VLFM-style modular baseline (baselines.md "Modular baseline", vlfm.md).
+"""`--agent vlfm`: the VLFM-style modular baseline (docs/spec.md#modular-baseline and #vlfm).
 
 Episode: 12 TURN_LEFT (a full turn) -> explore the frontier with the highest language value, driven to
 by the point-goal navigator -> once the detector fires, bee-line to the nearest lifted goal point and STOP
@@ -50,10 +50,16 @@ class VLFMAgent:
         self.timing: dict[str, float] = {}  # ms of the last step per phase (benchmarks/vlfm_step.py)
 
     @staticmethod
+    def resolved_config(**kwargs: Any) -> VLFMConfig:
+        """The config the constructor builds from these arguments (the experiment runner records it, so a
+        preset changed in code makes a finished evaluation stale)."""
+        preset = kwargs.pop("preset", "cpu")
+        return modular_config(VLFMConfig, preset, kwargs)
+
+    @staticmethod
     def describe(**kwargs: Any) -> str:
         """Row name for reports, from the constructor arguments."""
-        preset = kwargs.pop("preset", "cpu")
-        return describe_vlfm(modular_config(VLFMConfig, preset, kwargs))
+        return describe_vlfm(VLFMAgent.resolved_config(**kwargs))
 
     def reset(self, episode_info: dict) -> None:
         core = self.core

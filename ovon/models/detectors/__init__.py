@@ -6,24 +6,20 @@ from __future__ import annotations
 
 from ovon.models.detectors.base import Detection, Detector, box_of
 from ovon.models.detectors.config import DETECTOR_PRESETS, DetectorConfig, detector_preset
-from ovon.plugins import is_spec, load_class
+from ovon.plugins import load_named
 
-DETECTORS = ("oracle", "owlv2")
+BUILTIN: dict[str, str] = {
+    "oracle": "ovon.models.detectors.oracle:OracleDetector",
+    "owlv2": "ovon.models.detectors.owlv2:OWLv2Detector",
+}
+DETECTORS = tuple(BUILTIN)
 
 
 def make_detector(cfg: DetectorConfig | None = None, text_encoder=None) -> Detector:
+    """The detector `cfg.kind` names; built-ins get the shared goal-text encoder, plug-ins only the config."""
     cfg = cfg or DetectorConfig()
-    if cfg.kind == "oracle":
-        from ovon.models.detectors.oracle import OracleDetector
-
-        return OracleDetector(cfg, text_encoder)
-    if cfg.kind == "owlv2":
-        from ovon.models.detectors.owlv2 import OWLv2Detector
-
-        return OWLv2Detector(cfg)
-    if is_spec(cfg.kind):
-        return load_class(cfg.kind, "detector.kind", f"one of {list(DETECTORS)} or package.module:Class")(cfg)
-    raise ValueError(f"detector.kind = {cfg.kind!r} is unknown; use one of {list(DETECTORS)} or package.module:Class")
+    cls = load_named(cfg.kind, BUILTIN, "detector.kind")
+    return cls(cfg, text_encoder) if cfg.kind in BUILTIN else cls(cfg)
 
 
 def describe_detector(cfg: DetectorConfig) -> str:

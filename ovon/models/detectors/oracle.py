@@ -64,7 +64,7 @@ class OracleDetector:
 
     # -- scene ----------------------------------------------------------------------------------
     def _set_scene(self, world) -> None:
-        key = getattr(world, "key", None) or id(world)
+        key = world.key or id(world)  # an unnamed scene (scene_id "") is told apart by identity
         if key == self._scene_key:
             return
         objs = [o for o in world.scene.objects if o.category]

@@ -8,7 +8,6 @@ not masks: lifting uses the box's central part (`LiftConfig.box_shrink`).
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 import numpy as np
@@ -16,44 +15,33 @@ import torch
 
 from ovon.models.detectors.base import Detection
 from ovon.models.detectors.config import DetectorConfig
-from ovon.models.encoders.base import ModelNotAvailableError
-
-_LOCK = threading.Lock()
-_LOADED: dict[tuple[str, str], tuple[Any, Any, Any]] = {}
+from ovon.models.hf import load_pretrained
 
 
 def load_owlv2(name_or_path: str, device: str = "cpu") -> tuple[Any, Any, Any]:
     """(model, image_processor, tokenizer) from the local cache/folder; `ModelNotAvailableError` at once
     (one line naming the model and how to get it) when the files are missing."""
-    key = (str(name_or_path), device)
-    with _LOCK:
-        if key in _LOADED:
-            return _LOADED[key]
+
+    def classes() -> tuple[Any, Any, Any]:
         from transformers import AutoTokenizer, Owlv2ForObjectDetection, Owlv2ImageProcessorPil
 
-        try:
-            model = Owlv2ForObjectDetection.from_pretrained(str(name_or_path), local_files_only=True)
-            processor = Owlv2ImageProcessorPil.from_pretrained(str(name_or_path), local_files_only=True)
-            tokenizer = AutoTokenizer.from_pretrained(str(name_or_path), local_files_only=True)
-        except (OSError, ValueError) as e:
-            raise ModelNotAvailableError(
-                f"OWLv2 model {name_or_path!r} is not available locally ({type(e).__name__}); weights are never "
+        return Owlv2ForObjectDetection, Owlv2ImageProcessorPil, AutoTokenizer
+
+    def missing(e: Exception) -> str:
+        return (f"OWLv2 model {name_or_path!r} is not available locally ({type(e).__name__}); weights are never "
                 f"downloaded at run time: on a machine with internet run `hf download {name_or_path}` and copy "
                 f"~/.cache/huggingface here (or set HF_HOME), or set detector.owlv2_model to a save_pretrained "
-                f"folder; without weights use detector.kind=oracle (oracle detection)"
-            ) from None
-        model = model.to(device).eval()
-        for p in model.parameters():
-            p.requires_grad_(False)
-        _LOADED[key] = (model, processor, tokenizer)
-        return _LOADED[key]
+                f"folder; without weights use detector.kind=oracle (oracle detection)")
+
+    return load_pretrained("owlv2", name_or_path, device, classes, missing)
 
 
 class OWLv2Detector:
     name = "OWLv2"
     privileged = False
 
-    def __init__(self, cfg: DetectorConfig | None = None) -> None:
+    def __init__(self, cfg: DetectorConfig | None = None, text_encoder=None) -> None:
+        del text_encoder  # OWLv2 embeds the query with its own text tower
         self.cfg = cfg or DetectorConfig(kind="owlv2")
         self.model, self.processor, self.tokenizer = load_owlv2(self.cfg.owlv2_model, self.cfg.device)
         self.max_text = int(self.model.config.text_config.max_position_embeddings)

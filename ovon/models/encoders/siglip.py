@@ -1,24 +1,20 @@
 """SigLIP image encoder (the paper's frozen encoder), loaded only from local files.
 
-Why local only: no machine of this project can download weights, and without `local_files_only` a
-missing model costs ~24 s of network retries before failing. Uses the PIL image processor of
+Loaded through `ovon.models.hf.load_pretrained` (local files only, once per process). Uses the PIL image processor of
 transformers 5 (`SiglipImageProcessorPil`), never `AutoImageProcessor` (which wants torchvision).
 """
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 import numpy as np
 import torch
 
-from ovon.models.encoders.base import ModelNotAvailableError, ObsBatch, get_obs
+from ovon.models.encoders.base import ObsBatch, get_obs
+from ovon.models.hf import load_pretrained
 
 DEFAULT_SIGLIP = "google/siglip-base-patch16-256"
-
-_LOCK = threading.Lock()
-_LOADED: dict[tuple[str, str], tuple[Any, Any, Any]] = {}
 
 
 def _missing_message(name_or_path: str, err: Exception) -> str:
@@ -37,23 +33,13 @@ def load_siglip(name_or_path: str = DEFAULT_SIGLIP, device: str = "cpu") -> tupl
 
     Raises `ModelNotAvailableError` at once when the files are missing.
     """
-    key = (str(name_or_path), device)
-    with _LOCK:
-        if key in _LOADED:
-            return _LOADED[key]
+
+    def classes() -> tuple[Any, Any, Any]:
         from transformers import SiglipImageProcessorPil, SiglipModel, SiglipTokenizer
 
-        try:
-            model = SiglipModel.from_pretrained(str(name_or_path), local_files_only=True)
-            processor = SiglipImageProcessorPil.from_pretrained(str(name_or_path), local_files_only=True)
-            tokenizer = SiglipTokenizer.from_pretrained(str(name_or_path), local_files_only=True)
-        except (OSError, ValueError) as e:
-            raise ModelNotAvailableError(_missing_message(str(name_or_path), e)) from e
-        model = model.to(device).eval()
-        for p in model.parameters():
-            p.requires_grad_(False)
-        _LOADED[key] = (model, processor, tokenizer)
-        return _LOADED[key]
+        return SiglipModel, SiglipImageProcessorPil, SiglipTokenizer
+
+    return load_pretrained("siglip", name_or_path, device, classes, lambda e: _missing_message(str(name_or_path), e))
 
 
 def _l2(x: torch.Tensor) -> torch.Tensor:

@@ -29,8 +29,7 @@ class MiniLMText(CachedTextEncoder):
             from ovon.models import text_minilm  # lazy: loads a model on first use
 
             # One shared MiniLM per process (the split code uses the same instance).
-            factory = getattr(text_minilm, "default_text_encoder", text_minilm.MiniLMTextEncoder)
-            self._encoder = factory()
+            self._encoder = text_minilm.default_text_encoder()
         return self._encoder
 
     def _embed(self, texts: list[str]) -> torch.Tensor:

@@ -11,8 +11,9 @@ from typing import Any
 # visual mesh suffixes, in order of preference inside one folder (plain glb first: HM3D's glb release
 # has JPEG/PNG textures, cheaper to decode than the Basis ones of `.basis.glb`)
 MESH_SUFFIXES = (".glb", ".basis.glb", ".gltf", ".ply", ".obj")
-_SUFFIXES = (".semantic.glb", ".semantic.txt", ".ovon.json", ".stage_config.json", ".basis.glb", ".glb",
-             ".gltf", ".ply", ".obj")
+_SUFFIXES = (".semantic.glb", ".semantic.txt", ".ovon.json", ".stage_config.json", ".basis.navmesh", ".navmesh",
+             ".basis.glb", ".glb", ".gltf", ".ply", ".obj")
+NAVMESH_SUFFIXES = (".navmesh", ".basis.navmesh")  # habitat's navmesh beside the mesh, in order of preference
 EXPECTED = "<id>.glb (or .basis.glb / .gltf / .ply / .obj), optionally <id>.semantic.glb + <id>.semantic.txt"
 
 
@@ -38,7 +39,7 @@ def _is_mesh(p: Path) -> bool:
 def find_scene_files(path: str | Path) -> dict[str, Any]:
     """Locate the files of one scene given its folder or any of its files.
 
-    Returns {"folder", "scene_id", "stem", "visual", "semantic", "semantic_txt", "sidecar",
+    Returns {"folder", "scene_id", "stem", "visual", "semantic", "semantic_txt", "sidecar", "navmesh",
     "stage_config", "dataset_config"}; optional entries are None when absent. Given a mesh file, that
     file is the visual mesh; given a folder or an annotation file, the plain `.glb` is preferred.
     """
@@ -80,6 +81,7 @@ def find_scene_files(path: str | Path) -> dict[str, Any]:
         "semantic": opt(".semantic.glb"),
         "semantic_txt": opt(".semantic.txt"),
         "sidecar": opt(".ovon.json"),
+        "navmesh": next((q for s in NAVMESH_SUFFIXES if (q := opt(s)) is not None), None),
         "stage_config": _stage_config(folder, stem, visual),
         "dataset_config": _dataset_config(folder),
     }

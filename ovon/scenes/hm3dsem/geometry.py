@@ -31,6 +31,20 @@ def detect_floors(mesh: Mesh, bin_size: float = 0.1, min_area: float = 2.0) -> l
         return []  # no floor at all (a wrong up axis?): never a made-up height
     y = mesh.vertices[mesh.faces[up]].astype(np.float64)[:, :, 1].mean(axis=1)
     w = area[up]
+    chosen = height_peaks(y, w, bin_size, min_area, FLOOR_SEPARATION)
+    faces_up = mesh.faces[up]
+    top = float(mesh.vertices[:, 1].max())
+    kept = [h for h in chosen
+            if top - h > 0.5 or _covered_fraction(mesh, faces_up[np.abs(y - h) <= bin_size], h) >= 0.5]
+    return sorted(kept or [min(chosen)])
+
+
+def height_peaks(y: np.ndarray, w: np.ndarray, bin_size: float = 0.1, min_area: float = 2.0,
+                 separation: float = FLOOR_SEPARATION) -> list[float]:
+    """Heights of the big horizontal areas among surfaces at heights `y` with areas `w` (not sorted,
+    largest first): an area-weighted histogram, peaks taken greedily by area (at least `min_area` and
+    15% of the largest), each more than `separation` from the ones already taken; the largest single
+    surface when no peak qualifies."""
     lo = np.floor(y.min() / bin_size) * bin_size
     bins = np.floor((y - lo) / bin_size).astype(np.int64)
     hist = np.bincount(bins, weights=w)
@@ -47,15 +61,9 @@ def detect_floors(mesh: Mesh, bin_size: float = 0.1, min_area: float = 2.0) -> l
         srt = np.argsort(ys)
         cum = np.cumsum(ws[srt])
         h = float(ys[srt][np.searchsorted(cum, cum[-1] / 2.0)])  # area-weighted median
-        if all(abs(h - c) > FLOOR_SEPARATION for c in chosen):
+        if all(abs(h - c) > separation for c in chosen):
             chosen.append(h)
-    if not chosen:
-        chosen = [float(y[np.argmax(w)])]
-    faces_up = mesh.faces[up]
-    top = float(mesh.vertices[:, 1].max())
-    kept = [h for h in chosen
-            if top - h > 0.5 or _covered_fraction(mesh, faces_up[np.abs(y - h) <= bin_size], h) >= 0.5]
-    return sorted(kept or [min(chosen)])
+    return chosen or [float(y[np.argmax(w)])]
 
 
 def _covered_fraction(mesh: Mesh, faces: np.ndarray, h: float, cell: float = 0.5, samples: int = 50_000) -> float:

@@ -93,6 +93,7 @@ def _load_ours(files: dict, vocab: Any) -> tuple[Scene, list[str]]:
         semantic_mesh=semantic_mesh,
         semantic_colors={e.id: e.color for e in entries},
         source=side.get("source") or str(files["folder"]),
+        navmesh=str(files["navmesh"] or ""),
     )
     records = side.get("objects", {})
     mismatched: list[str] = []
@@ -159,6 +160,7 @@ def _load_scan(files: dict, vocab: Any, up: str | None) -> tuple[Scene, list[str
         floor_heights=detect_floors(mesh),
         semantic_colors={e.id: e.color for e in entries},
         source=str(files["visual"] if not has_txt else folder),
+        navmesh=str(files["navmesh"] or ""),
     )
     if not has_txt:
         scene.semantics_missing = (

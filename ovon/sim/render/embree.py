@@ -53,7 +53,7 @@ class EmbreeRenderer:
         mesh = scene.mesh
         self._faces = np.ascontiguousarray(mesh.faces, dtype=np.int32)
         self._vis: VisualSource = visual_source(mesh)
-        self.rgb = bool(getattr(camera, "rgb", True))  # False: depth and ids only (no colour lookups)
+        self.rgb = bool(camera.rgb)  # False: depth and ids only (no colour lookups)
         self._mode = _MODES[self._vis.mode] if self.rgb else _DEPTH_ONLY
         # Unused inputs are passed as tiny dummies so numba compiles one specialisation.
         self._face_rgb = _or(self._vis.face_rgb, np.zeros((1, 3), np.uint8))

@@ -199,7 +199,7 @@ class GLRenderer:
         self.width = int(camera.width)
         self.height = int(camera.height)
         self.hfov_deg = float(camera.hfov_deg)
-        self.cull = bool(getattr(camera, "cull", True))
+        self.cull = bool(camera.cull)
         self.ctx = gl_context()
         ctx = self.ctx
         self._res: list = []  # GL objects to release on close
@@ -211,7 +211,7 @@ class GLRenderer:
 
         # Without RGB (camera.rgb = False: no consumer reads it) the colour attribute, texture lookup,
         # attachment and read-back are all skipped; depth and ids stay one pass.
-        self.rgb = bool(getattr(camera, "rgb", True))
+        self.rgb = bool(camera.rgb)
         vis = visual_source(scene.mesh) if self.rgb else None
         sem = semantic_source(scene.semantic_source, scene.semantic_colors)
         self._separate = not same_geometry(scene.mesh, scene.semantic_mesh)

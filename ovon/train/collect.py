@@ -1,0 +1,168 @@
+"""The acting loop shared by DAgger and PPO: a policy acts in the training envs for T steps and every
+observation, label, action and reward is recorded; plus the pure return/advantage arithmetic.
+
+The collector owns what acting carries across updates (the envs' current batch, the policy's acting
+memory, the previous actions) and hands it to the checkpoint (`state`) and back (`restore`), so an
+algorithm only says how an action is chosen from the logits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import torch
+
+from ovon.train.batches import Images, features, map_images, stack_images
+from ovon.train.envs import Batch
+
+# choose(logits (N, A), batch) -> (actions (N,), log-probabilities of those actions (N,) or None)
+Chooser = Callable[[torch.Tensor, Batch], tuple[torch.Tensor, torch.Tensor | None]]
+
+
+@dataclass
+class Rollout:
+    """`steps` steps of every env, stacked as (N, T, ...) tensors on the CPU; with a bootstrap
+    observation the observation tensors hold T + 1 steps (the last one: value only, no action)."""
+
+    images: Images
+    goals: torch.Tensor
+    prevs: torch.Tensor  # previous action of each step (-1 at an episode start)
+    starts: torch.Tensor  # bool: the step is the first of an episode
+    labels: torch.Tensor  # the expert's label per step (-1 without an expert)
+    actions: torch.Tensor  # (N, T)
+    behaviour_logp: torch.Tensor | None  # (N, T) log-prob of each action when it was taken
+    rewards: torch.Tensor  # (N, T): reward of step t
+    dones: torch.Tensor  # (N, T): step t ended its episode
+    state0: Any  # the acting memory before the chunk (LSTM (h, c); None for the transformer)
+    finished: list[dict] = field(default_factory=list)  # metrics of the episodes that ended
+    prefix: int = 0  # leading steps of images/goals/prevs/starts that precede the chunk (context only)
+
+
+class RolloutCollector:
+    """Acts in `envs`, starting from `batch` (the envs' current observation)."""
+
+    def __init__(self, envs, batch: Batch, policy, device: torch.device | str, prefix: int = 0) -> None:
+        """`prefix` > 0: each rollout also carries the `prefix` steps before it, so that an update
+        that re-reads the chunk through a sliding-window transformer sees the context acting saw."""
+        self.envs, self.batch, self.device = envs, batch, device
+        self.num_envs = envs.num_envs
+        self.act_state = policy.init_state(self.num_envs, device)
+        self.prev_action = torch.full((self.num_envs,), -1, dtype=torch.long, device=device)
+        self.prefix = prefix
+        self.tail: dict | None = None  # the last `prefix` steps acted (images, goals, prevs, starts)
+
+    # -- resume ---------------------------------------------------------------------------------
+    def state(self) -> dict:
+        """What a checkpoint needs to continue acting exactly."""
+        return {"env": self.envs.get_state(), "act_state": self.act_state, "prev_action": self.prev_action.cpu(),
+                "tail": self.tail}
+
+    def restore(self, saved: dict) -> None:
+        self.act_state = saved["act_state"]
+        self.prev_action = saved["prev_action"].to(self.device)
+        self.tail = saved.get("tail")
+        self.batch = self.envs.set_state(saved["env"])
+
+    # -- acting ---------------------------------------------------------------------------------
+    def collect(self, actor, steps: int, choose: Chooser, bootstrap: bool = False) -> Rollout:
+        """`steps` actions per env with `actor` (in eval mode, no gradients); `bootstrap` records the
+        observation after the last step too (PPO's value bootstrap)."""
+        dev = self.device
+        state0 = _clone_state(self.act_state)
+        images, goals, prevs, starts, labels = [], [], [], [], []
+        actions, logps, rewards, dones, finished = [], [], [], [], []
+        actor.eval()
+        for t in range(steps + 1):
+            b = self.batch
+            if t == steps and not bootstrap:
+                break
+            images.append(b.image)
+            goals.append(b.goal)
+            prevs.append(self.prev_action.cpu())
+            starts.append(b.first)
+            labels.append(b.label)
+            if t == steps:
+                break
+            with torch.no_grad():
+                obs = actor.make_obs(features(actor, map_images(b.image, lambda x: x.to(dev))), b.goal.to(dev))
+                logits, _, self.act_state = actor.act_step(obs, self.prev_action, self.act_state, b.first.to(dev))
+                action, logp = choose(logits, b)
+            actions.append(action.cpu())
+            if logp is not None:
+                logps.append(logp.cpu())
+            self.batch = self.envs.step(action.cpu())
+            rewards.append(self.batch.reward)
+            dones.append(self.batch.done)
+            self.prev_action = torch.where(self.batch.first.to(dev), torch.full_like(action, -1), action)
+            finished += self.batch.metrics
+        obs = {"images": stack_images(images, 1), "goals": torch.stack(goals, 1), "prevs": torch.stack(prevs, 1),
+               "starts": torch.stack(starts, 1)}
+        if self.prefix > 0:
+            obs = self._with_prefix(obs, steps)
+        return Rollout(**obs, labels=torch.stack(labels, 1), actions=torch.stack(actions, 1),
+                       behaviour_logp=torch.stack(logps, 1) if logps else None, rewards=torch.stack(rewards, 1),
+                       dones=torch.stack(dones, 1), state0=state0, finished=finished,
+                       prefix=self.prefix)
+
+    def _with_prefix(self, obs: dict, steps: int) -> dict:
+        """Prepend the stored tail (before the first rollout: padding marked as episode starts, which
+        nothing attends to because every env's first step is itself a start) and keep the new tail."""
+        P = self.prefix
+        tail = self.tail
+        if tail is None:
+            tail = {k: _pad(v, P, k == "starts") for k, v in obs.items()}
+        full = {k: _cat_time(tail[k], v) for k, v in obs.items()}
+        acted = {k: _slice_time(full[k], P, P + steps) for k in full}  # the chunk without its bootstrap
+        self.tail = {k: _slice_time(_cat_time(tail[k], acted[k]), -P, None) for k in full}
+        return full
+
+
+def _cat_time(a, b):
+    return {k: torch.cat([a[k], b[k]], 1) for k in a} if isinstance(a, dict) else torch.cat([a, b], 1)
+
+
+def _slice_time(x, lo, hi):
+    return {k: v[:, lo:hi] for k, v in x.items()} if isinstance(x, dict) else x[:, lo:hi]
+
+
+def _pad(x, n: int, start: bool):
+    """n steps of padding shaped like x's first step (starts: all True)."""
+    if isinstance(x, dict):
+        return {k: _pad(v, n, start) for k, v in x.items()}
+    first = x[:, :1]
+    pad = torch.ones_like(first) if start else torch.zeros_like(first)
+    return pad.expand(-1, n, *first.shape[2:]).clone()
+
+
+def _clone_state(state):
+    """Detached copy of an LSTM (h, c) acting state (the transformer needs none: chunks carry starts)."""
+    if isinstance(state, tuple):
+        return tuple(s.detach().clone() for s in state)
+    return None
+
+
+# -- returns -----------------------------------------------------------------------------------------
+def gae(rewards: torch.Tensor, values: torch.Tensor, dones: torch.Tensor, gamma: float,
+        lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Generalised advantage estimation over (N, T) rewards / dones and (N, T + 1) values (the last
+    column bootstraps). A done step does not look past its episode's end. Returns (advantages, returns)."""
+    done = dones.float()
+    adv = torch.zeros_like(rewards)
+    running = torch.zeros(rewards.shape[0], dtype=rewards.dtype, device=rewards.device)
+    for t in reversed(range(rewards.shape[1])):
+        nonterminal = 1.0 - done[:, t]
+        delta = rewards[:, t] + gamma * values[:, t + 1] * nonterminal - values[:, t]
+        running = delta + gamma * lam * nonterminal * running
+        adv[:, t] = running
+    return adv, adv + values[:, : rewards.shape[1]]
+
+
+def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
+    """1 - Var(returns - values) / Var(returns): 1 is a perfect critic, 0 no better than the mean,
+    negative worse (0 when the returns do not vary: nothing to explain)."""
+    var = returns.var()
+    if not torch.isfinite(var) or var.item() == 0.0:
+        return 0.0
+    return float(1.0 - (returns - values).var() / var)

@@ -1,0 +1,240 @@
+"""Experiment provenance: reports name no path of the machine they ran on (`$ROOT`, `$EPISODES`,
+`$SCENES`, pasteable in a shell), a preset changed in code makes a finished cell stale (its resolved
+config is recorded), and records written before either stay readable."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import os
+import re
+import shlex
+import subprocess
+from pathlib import Path
+
+import pytest
+from rich.console import Console
+
+from ovon.experiments import DefinitionError, build_report, load_experiment, resolve, run
+from ovon.experiments.plan import display
+from ovon.experiments.provenance import parse_code
+from ovon.experiments.report import run_command_line
+from ovon.experiments.state import (
+    cell_status,
+    config_unknown,
+    full_commands,
+    identity,
+    inputs,
+    record_path,
+    resolved_config,
+    shell_word,
+    write_record,
+)
+
+
+def _plan(root: Path, data: Path, scenes: Path, experiment: str = "noise"):
+    """An experiment at cpu scale reading a dataset outside its root (`data.source: paths`)."""
+    return resolve(
+        [load_experiment(experiment)],
+        "cpu",
+        root,
+        ["data.source=paths", f"data.episodes={data}", f"data.scenes={scenes}"],
+    )
+
+
+def _done(plan, cid: str, **extra) -> None:
+    """A finished cell as the runner records it (outputs present, inputs as they are now)."""
+    cell = plan.cells[cid]
+    cell.folder.mkdir(parents=True, exist_ok=True)
+    (cell.folder / ("policy.pt" if cell.kind == "train" else "summary.json")).write_text("{}")
+    rec = {
+        "kind": cell.kind,
+        "name": cell.name,
+        "state": "done",
+        "attempts": 1,
+        "rc": 0,
+        "wall_s": 60.0,
+        "identity": identity(plan, cell),
+        "commands": full_commands(plan, cell),
+        "inputs": inputs(plan, cell),
+        "code": "ovon 0.1.0 (abc1234)",
+        "config": resolved_config(plan, cell),
+    }
+    rec.update(extra)
+    write_record(plan, cell, {k: v for k, v in rec.items() if v is not ...})
+
+
+def test_commands_in_reports_name_no_path_of_the_machine_and_paste_into_a_shell(
+    tmp_path, tiny_dataset, tiny_scenes
+) -> None:
+    root = tmp_path / "runs" / "exp"
+    plan = _plan(root, tiny_dataset, tiny_scenes)
+    build_report(plan, tmp_path / "report")
+    text = (tmp_path / "report" / "report.md").read_text()
+    data = (tmp_path / "report" / "report.json").read_text()
+    for leaked in (str(tmp_path), str(tiny_dataset), str(tiny_scenes)):
+        assert leaked not in text and leaked not in data
+    assert "--out $ROOT/cpu/train/dagrl" in text and "--data $EPISODES --scenes $SCENES" in text
+    again = run_command_line(plan)
+    assert again == (
+        "ovon experiment run noise --scale cpu --root $ROOT --set data.source=paths "
+        "--set data.episodes=$EPISODES --set data.scenes=$SCENES"
+    )
+    assert f"all of them: `{again}`" in text
+    assert "Provenance: no cell has finished yet" in text
+    # pasted after ROOT=... EPISODES=... SCENES=..., every command is the one the runner executes
+    env = {**os.environ, "ROOT": str(root), "EPISODES": str(tiny_dataset), "SCENES": str(tiny_scenes)}
+    for cell in plan.cells.values():
+        for argv, shown in zip(cell.commands, full_commands(plan, cell)):
+            words = (
+                subprocess.run(["bash", "-c", "printf '%s\\0' " + shown], env=env, capture_output=True, check=True)
+                .stdout.decode()
+                .split("\0")[:-1]
+            )
+            assert words == shlex.split(display(cell, argv)), cell.id
+    # a root with a space and a dataset inside the root
+    spaced = tmp_path / "my runs"
+    plan = resolve([load_experiment("noise")], "tiny", spaced)
+    cmd = full_commands(plan, plan.cells["data:data"])[-1]
+    assert "--out $ROOT/tiny/data/episodes" in cmd and str(spaced) not in cmd
+    assert shell_word("$ROOT/a b") == '"$ROOT/a b"' and shell_word("$HOME/x") == "'$HOME/x'"
+    assert shell_word("text_cache=$ROOT/x") == "text_cache=$ROOT/x" and shell_word("a'b") == shlex.quote("a'b")
+    assert run_command_line(plan) == "ovon experiment run noise --scale tiny --root $ROOT"
+
+
+def test_records_from_before_tokens_and_configs_stay_done_and_the_runner_says_so_once(
+    tmp_path, tiny_dataset, tiny_scenes
+) -> None:
+    root = tmp_path / "root"
+    plan = _plan(root, tiny_dataset, tiny_scenes)
+    cell = plan.cells["train:dagger"]
+    # the old form: only the root a token (shell-quoted), the dataset's absolute path, no resolved config
+    old = [shlex.join(shlex.split(c)) for c in identity(plan, cell, legacy=True)]
+    assert str(tiny_dataset) in old[0] and "'$ROOT/cpu/train/dagger'" in old[0]
+    _done(
+        plan,
+        "train:dagger",
+        identity=old,
+        commands=[shlex.join(shlex.split(c)) for c in full_commands(plan, cell, legacy=True)],
+        config=...,
+    )
+    assert "config" not in json.loads(record_path(plan, cell).read_text())
+    assert cell_status(plan, cell, {}).state == "done"
+    assert config_unknown(plan, list(plan.cells)) == ["train:dagger"]
+    out = io.StringIO()
+    run(plan, dry_run=True, console=Console(file=out, width=300))
+    text = out.getvalue()
+    assert text.count("ran before ovon recorded resolved configs (train:dagger)") == 1
+    assert re.search(r"^train:dagger +done \(1.0 min\)$", text, re.M)
+    # an old record whose command differs names the real difference, not the form of its paths
+    _done(plan, "train:dagger", identity=[c.replace("max_updates=400", "max_updates=300") for c in old], config=...)
+    assert cell_status(plan, cell, {}).detail == (
+        "the definition changed since it ran: --set max_updates=300 -> --set max_updates=400"
+    )
+    _done(plan, "train:dagger", identity=old, config=...)
+    build_report(plan, tmp_path / "report")
+    assert (
+        "| train:dagger | done | abc1234 | clean | not recorded (commands compared) |  |"
+        in (tmp_path / "report" / "report.md").read_text()
+    )
+
+
+def test_a_preset_changed_in_code_makes_a_finished_cell_stale(tmp_path, tiny_dataset, tiny_scenes, monkeypatch) -> None:
+    import ovon.agents.modular.vlfm as vlfm
+    import ovon.config.dataset as gen
+    import ovon.train.config as train_config
+
+    root = tmp_path / "root"
+    plan = _plan(root, tiny_dataset, tiny_scenes)
+    _done(plan, "train:dagger")
+    _done(plan, "eval:vlfm")
+    rec = json.loads(record_path(plan, plan.cells["eval:vlfm"]).read_text())
+    assert rec["config"]["agent_config"]["spin_steps"] == 12 and rec["config"]["sim"]["camera"]["width"] == 72
+    assert json.loads(record_path(plan, plan.cells["train:dagger"]).read_text())["config"]["text_cache"] == (
+        "$ROOT/cpu/data/text_cache.pt"
+    )
+    assert {
+        c: s.state
+        for c, s in run(plan, dry_run=True, console=Console(file=io.StringIO())).statuses.items()
+        if c in ("train:dagger", "eval:vlfm")
+    } == {"train:dagger": "done", "eval:vlfm": "done"}
+    # more seeds or episodes extend an evaluation: not a change of its config
+    more = resolve(
+        [load_experiment("noise")],
+        "cpu",
+        root,
+        ["data.source=paths", f"data.episodes={tiny_dataset}", f"data.scenes={tiny_scenes}", "evaluate.seeds=[0,1,2]"],
+    )
+    assert cell_status(more, more.cells["eval:vlfm"], {}).state == "partial"
+    # moving the dataset changes nothing: its path is a token, its content is the input
+    moved = tmp_path / "elsewhere"
+    tiny_dataset.rename(moved)
+    try:
+        elsewhere = _plan(root, moved, tiny_scenes)
+        assert [cell_status(elsewhere, elsewhere.cells[c], {}).state for c in ("train:dagger", "eval:vlfm")] == [
+            "done",
+            "done",
+        ]
+    finally:
+        moved.rename(tiny_dataset)
+
+    # the cpu-small preset's DAgger schedule changes in code: the command line is the same, the config is not
+    cpu_small = train_config.PRESETS["cpu-small"]
+    monkeypatch.setitem(
+        train_config.PRESETS,
+        "cpu-small",
+        lambda: dataclasses.replace(cpu_small(), dagger=dataclasses.replace(cpu_small().dagger, beta_updates=7)),
+    )
+    # and VLFM's preset
+    make = vlfm.modular_config
+    monkeypatch.setattr(
+        vlfm, "modular_config", lambda cls, preset, over: dataclasses.replace(make(cls, preset, over), spin_steps=3)
+    )
+    now = _plan(root, tiny_dataset, tiny_scenes)
+    assert now.cells["train:dagger"].commands == plan.cells["train:dagger"].commands
+    st = cell_status(now, now.cells["train:dagger"], {})
+    assert (
+        st.state == "changed" and st.detail == "its resolved config changed since it ran: dagger.beta_updates 200 -> 7"
+    )
+    assert cell_status(now, now.cells["eval:vlfm"], {}).detail.endswith("agent_config.spin_steps 12 -> 3")
+    with pytest.raises(DefinitionError) as err:
+        run(now, console=Console(file=io.StringIO()))
+    msg = str(err.value)
+    assert "changed since they ran" in msg and "dagger.beta_updates 200 -> 7" in msg and "--redo dagger," in msg
+    assert "\n" not in msg
+    # --redo moves the stale cells (and what depends on them) aside
+    res = run(now, redo_cells=["dagger", "vlfm"], dry_run=True, console=Console(file=io.StringIO()))
+    assert res.statuses["train:dagger"].state == "redo" and res.statuses["eval:vlfm"].state == "redo"
+
+    # the generation preset of generated data (tiny scale) is part of the data cell's config
+    tiny = resolve([load_experiment("noise")], "tiny", root)
+    write_record(
+        tiny,
+        tiny.cells["data:data"],
+        {
+            "state": "done",
+            "identity": identity(tiny, tiny.cells["data:data"]),
+            "config": resolved_config(tiny, tiny.cells["data:data"]),
+        },
+    )
+    assert cell_status(tiny, tiny.cells["data:data"], {}).state != "changed"
+    fast = gen.GENERATION_PRESETS["fast"]
+    monkeypatch.setitem(
+        gen.GENERATION_PRESETS,
+        "fast",
+        lambda: dataclasses.replace(fast(), starts=dataclasses.replace(fast().starts, max_tries=99)),
+    )
+    st = cell_status(tiny, tiny.cells["data:data"], {})
+    assert st.state == "changed" and "starts.max_tries 2000 -> 99" in st.detail
+
+
+def test_parse_code() -> None:
+    assert parse_code("ovon 0.1.0 (abc1234+dirty)") == {
+        "version": "ovon 0.1.0",
+        "commit": "abc1234",
+        "dirty": True,
+        "text": "ovon 0.1.0 (abc1234+dirty)",
+    }
+    assert parse_code("ovon 0.1.0")["commit"] is None and not parse_code("ovon 0.1.0")["dirty"]
+    assert parse_code("")["version"] == ""

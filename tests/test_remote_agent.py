@@ -1,0 +1,251 @@
+"""`ovon serve` + `ovon evaluate --agent remote:HOST:PORT`: byte-identical results to the same agent
+in-process (random, an oracle reading the privileged channel, VLFM), batching over workers and streams,
+one-line errors, and a server that dies or hangs mid-run, then a re-run that resumes. Servers listen on
+loopback, on free ports, and are always stopped."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+from ovon_agent import RemoteError
+
+from ovon.agents.remote import RemoteConfig
+from ovon.agents.served import servable_factory
+from ovon.cli.main import main as ovon
+from ovon.evaluate.harness import EvalConfig, evaluate
+from ovon.evaluate.results import read_records
+from tests.remote_agents import BatchedRandom, serving
+
+ROOT = Path(__file__).resolve().parents[1]
+OUTPUTS = ("episodes.jsonl", "summary.json")
+
+
+def cfg_for(tiny_dataset, tiny_scenes, agent: str, **kw) -> EvalConfig:
+    kw.setdefault("splits", ("val_seen", "val_unseen"))
+    kw.setdefault("episodes", 3)
+    return EvalConfig(agent=agent, data=str(tiny_dataset), scenes=str(tiny_scenes), **kw)
+
+
+def same_files(a: Path, b: Path) -> None:
+    for name in OUTPUTS:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def serve_process(*args: str, env: dict | None = None):
+    """`ovon serve ARGS` in its own process (the repository root as working directory); killed on exit."""
+    cmd = [sys.executable, "-m", "ovon.cli.main", "serve", *args]
+    proc = subprocess.Popen(
+        cmd,
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})},
+        start_new_session=True,
+    )
+    try:
+        line = proc.stdout.readline()
+        assert "remote:127.0.0.1:" in line, line
+        yield proc
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        proc.stdout.close()
+
+
+def test_served_random_agent_gives_byte_identical_files(tiny_dataset, tiny_scenes, tmp_path):
+    evaluate(cfg_for(tiny_dataset, tiny_scenes, "random"), tmp_path / "local", progress=False)
+    with serving(servable_factory("random"), name="random") as server:
+        remote = cfg_for(tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{server.port}")
+        evaluate(remote, tmp_path / "remote", progress=False)
+    same_files(tmp_path / "local", tmp_path / "remote")
+    assert (tmp_path / "remote" / "table.md").read_text() == (tmp_path / "local" / "table.md").read_text()
+
+
+def test_workers_and_lockstep_streams_reach_act_batch_as_batches(tiny_dataset, tiny_scenes, tmp_path):
+    """Two worker processes (two connections) x 3 episodes in lockstep each: one agent object with
+    act_batch sees batches, keeps episodes apart by stream, and the files are those of the random agent."""
+    evaluate(cfg_for(tiny_dataset, tiny_scenes, "random"), tmp_path / "local", progress=False)
+    agent = BatchedRandom()
+    with serving(agent, name="random") as server:
+        remote = cfg_for(
+            tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{server.port}", workers=2, remote=RemoteConfig(batch=3)
+        )
+        evaluate(remote, tmp_path / "remote", progress=False)
+        deadline = time.monotonic() + 10
+        while server._sessions and time.monotonic() < deadline:  # workers said goodbye as they ended
+            time.sleep(0.05)
+        assert not server._sessions
+    same_files(tmp_path / "local", tmp_path / "remote")
+    assert max(agent.batch_sizes) >= 3
+    assert len({k.split("/")[0] for k in agent.agents}) >= 2  # several connections (workers)
+
+
+def test_the_privileged_channel_travels_only_when_the_run_allows_oracles(tiny_dataset, tiny_scenes, tmp_path, capsys):
+    agent = "tests.remote_agents:OracleProbe"
+    evaluate(cfg_for(tiny_dataset, tiny_scenes, agent), tmp_path / "local", progress=False)
+    with serving(servable_factory(agent), name=agent, observations=["depth", "goal"]) as server:
+        address = f"remote:127.0.0.1:{server.port}"
+        rc = ovon(
+            [
+                "evaluate",
+                "--agent",
+                address,
+                "--data",
+                str(tiny_dataset),
+                "--scenes",
+                str(tiny_scenes),
+                "--episodes",
+                "3",
+                "--out",
+                str(tmp_path / "refused"),
+            ]
+        )
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and "asks for the privileged channel" in err
+        assert "--set remote.allow_privileged=true" in err and not (tmp_path / "refused").exists()
+        remote = cfg_for(tiny_dataset, tiny_scenes, address, remote=RemoteConfig(allow_privileged=True))
+        evaluate(remote, tmp_path / "remote", progress=False)
+    same_files(tmp_path / "local", tmp_path / "remote")
+
+
+def test_a_server_that_dies_is_one_line_and_the_rerun_resumes(tiny_dataset, tiny_scenes, tmp_path):
+    cfg = cfg_for(tiny_dataset, tiny_scenes, "random", chunk=1)
+    evaluate(cfg, tmp_path / "local", progress=False)
+    port = free_port()
+    remote = dataclasses.replace(cfg, agent=f"remote:127.0.0.1:{port}")
+    out = tmp_path / "remote"
+    serve = ("tests.remote_agents:DieAt", "--name", "random", "--port", str(port))
+    with serve_process(*serve, env={"OVON_TEST_DIE_AT": "3"}):
+        with pytest.raises(RemoteError) as e:
+            evaluate(remote, out, progress=False)
+    msg = str(e.value)
+    assert f"tcp://127.0.0.1:{port} closed the connection" in msg and "step 1 of episode val_" in msg
+    assert "re-run the same command to resume" in msg and "\n" not in msg
+    assert len(read_records(out)) == 2  # the episodes finished before the crash are kept
+    with serve_process(*serve):
+        evaluate(remote, out, progress=False)
+    same_files(tmp_path / "local", out)
+
+
+def test_a_hung_agent_times_out_with_the_episode_named(tiny_dataset, tiny_scenes, tmp_path):
+    release = threading.Event()
+
+    class Hung:
+        def reset(self, episode_info: dict) -> None:
+            pass
+
+        def act(self, observation: dict) -> int:
+            release.wait(30)
+            return 0
+
+    with serving(Hung) as server:
+        cfg = cfg_for(tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{server.port}", remote=RemoteConfig(timeout_s=0.5))
+        try:
+            with pytest.raises(
+                RemoteError,
+                match=r"did not answer step 1 of episode val_seen/\S+/\S+ within 0.5 s: "
+                r"no answer; fix: .*--set remote.timeout_s.*resume",
+            ):
+                evaluate(cfg, tmp_path / "hung", progress=False)
+        finally:
+            release.set()
+
+
+def test_command_line_refusals_are_one_line(tiny_dataset, tiny_scenes, tmp_path, capsys):
+    port = free_port()
+    data = ["--data", str(tiny_dataset), "--scenes", str(tiny_scenes), "--out", str(tmp_path / "x")]
+    cases = [
+        (["evaluate", "--agent", "remote:localhost", *data], "is not remote:HOST:PORT"),
+        (["evaluate", "--agent", "remote:127.0.0.1:70000", *data], "PORT in 1..65535"),
+        (
+            ["evaluate", "--agent", f"remote:127.0.0.1:{port}", "--agent-arg", "seed=3", *data],
+            "belong to the server; fix: pass them to `ovon serve AGENT --agent-arg seed=...`",
+        ),
+        (
+            ["evaluate", "--agent", f"remote:127.0.0.1:{port}", "--set", "remote.timeout_s=0.3", *data],
+            f"tcp://127.0.0.1:{port} did not answer the handshake within 0.3 s: nothing is listening there",
+        ),
+        (["evaluate", "--agent", f"remote:127.0.0.1:{port}", "--set", "remote.batch=0", *data], "remote.batch"),
+        (["serve", "shortest-path"], "cannot be served: it plans on the navigation grid"),
+        (["serve", "no_such_agent"], "unknown agent 'no_such_agent'"),
+        (["serve", "random", "--agent-arg", "bogus=1"], "has no constructor argument 'bogus'"),
+        (["serve", "random", "--observations", "rgb,sonar"], "--observations 'rgb,sonar': expected"),
+        (["serve", "random", "--port", "99999"], "--port"),
+    ]
+    for argv, expected in cases:
+        rc = ovon(argv)
+        err = capsys.readouterr().err
+        assert rc == 2 and err.startswith("ovon: error: ") and err.count("\n") == 1, (argv, err)
+        assert expected in err, (argv, err)
+    with serving(servable_factory("random")) as server:  # the port is taken
+        rc = ovon(["serve", "random", "--port", str(server.port)])
+        err = capsys.readouterr().err
+        assert rc == 2 and f"--port {server.port}: cannot listen" in err and "fix: another --port" in err
+    assert not (tmp_path / "x").exists()
+
+
+def test_the_token_comes_from_the_environment(tiny_dataset, tiny_scenes, tmp_path, monkeypatch):
+    with serving(servable_factory("random"), name="random", token="t0k") as server:
+        cfg = cfg_for(tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{server.port}", episodes=1)
+        monkeypatch.delenv("OVON_REMOTE_TOKEN", raising=False)
+        with pytest.raises(RemoteError, match="wrong or missing token; fix: set OVON_REMOTE_TOKEN"):
+            evaluate(cfg, tmp_path / "no", progress=False)
+        monkeypatch.setenv("OVON_REMOTE_TOKEN", "t0k")
+        assert evaluate(cfg, tmp_path / "yes", progress=False)["name"] == "random"
+    assert "t0k" not in (tmp_path / "yes" / "run.json").read_text()
+
+
+def test_served_vlfm_gives_byte_identical_files(tiny_dataset, tiny_scenes, tmp_path):
+    """VLFM (oracle detection, oracle-vl value: ground truth travels) served without RGB (the evaluation
+    skips colour rendering) gives the files of VLFM in-process."""
+    cfg = cfg_for(tiny_dataset, tiny_scenes, "vlfm", splits=("val_seen", "val_seen_synonyms"), episodes=2)
+    evaluate(cfg, tmp_path / "local", progress=False)
+    wanted = ["depth", "odometry", "goal", "collided"]
+    with serving(servable_factory("vlfm"), name="vlfm", observations=wanted) as server:
+        remote = dataclasses.replace(
+            cfg, agent=f"remote:127.0.0.1:{server.port}", remote=RemoteConfig(allow_privileged=True)
+        )
+        evaluate(remote, tmp_path / "remote", progress=False)
+    same_files(tmp_path / "local", tmp_path / "remote")
+
+
+def test_make_agent_gives_a_connected_client():
+    import numpy as np
+
+    from ovon.agents import make_agent
+    from ovon.agents.random_agent import RandomAgent
+    from ovon.config.base import ConfigError
+
+    obs = {"depth": np.ones((4, 4), np.float32), "odometry": np.zeros(3, np.float32), "goal": "bed", "collided": 0}
+    info = {"episode_id": "7", "seed": 3, "goal": "bed"}
+    with serving(servable_factory("random"), name="random") as server:
+        with pytest.raises(ConfigError, match="timeout_s"):
+            make_agent(f"remote:127.0.0.1:{server.port}", timeout_s=-1)
+        remote = make_agent(f"remote:127.0.0.1:{server.port}", timeout_s=5)
+        local = RandomAgent()
+        try:
+            assert remote.name == "random" and remote.privileged is False
+            for agent in (remote, local):
+                agent.reset(info)
+            assert [remote.act(obs) for _ in range(30)] == [local.act(obs) for _ in range(30)]
+        finally:
+            remote.close()

@@ -1,0 +1,139 @@
+"""RL plumbing that decides whether PPO can learn at all: GAE, the critic's explained variance, that
+rollout and update see the same policy (ratio 1 at lr 0, for the transformer's sliding window too), the
+imitation anchors and the critic warm-up gate of the fine-tune."""
+
+from __future__ import annotations
+
+import dataclasses
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+torch.set_num_threads(1)
+
+from ovon.train.collect import explained_variance, gae  # noqa: E402
+from ovon.train.config import FinetuneConfig, train_preset  # noqa: E402
+from ovon.train.episodes import adhoc_specs  # noqa: E402
+from ovon.train.logging import read_metrics  # noqa: E402
+from ovon.train.ppo import anchor_weight, kl_to  # noqa: E402
+from ovon.train.text import needed_texts, write_text_table  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def specs():
+    return adhoc_specs([0], categories=["couch", "bed", "toilet", "sink"])
+
+
+@pytest.fixture(scope="module")
+def table(tmp_path_factory, specs) -> str:
+    path = tmp_path_factory.mktemp("text") / "table.pt"
+    vec = {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(16).astype(np.float32)
+           for t in needed_texts(specs)}
+    write_text_table(path, vec)
+    return str(path)
+
+
+def test_gae_matches_a_hand_computation() -> None:
+    r = torch.tensor([[1.0, 0.0, 2.0]])
+    v = torch.tensor([[0.5, 0.2, 0.1, 3.0]])
+    d = torch.tensor([[False, True, False]])
+    g, lam = 0.9, 0.8
+    d2 = 2.0 + g * 3.0 - 0.1  # last step bootstraps
+    d1 = 0.0 - 0.2  # done: no value after it, no later advantage
+    d0 = 1.0 + g * 0.2 - 0.5
+    expect = torch.tensor([[d0 + g * lam * d1, d1, d2]])
+    adv, ret = gae(r, v, d, g, lam)
+    torch.testing.assert_close(adv, expect)
+    torch.testing.assert_close(ret, expect + v[:, :3])
+
+
+def test_explained_variance() -> None:
+    ret = torch.tensor([1.0, 2.0, 3.0, 4.0])
+    assert explained_variance(ret, ret) == pytest.approx(1.0)
+    assert explained_variance(torch.full((4,), 2.5), ret) == pytest.approx(0.0)
+    assert explained_variance(-ret, ret) < 0
+    assert explained_variance(ret, torch.ones(4)) == 0.0  # nothing to explain
+
+
+@pytest.mark.parametrize("core", ["transformer", "lstm"])
+def test_first_updates_at_lr_zero_have_ratio_one(tmp_path: Path, specs, table: str, core: str) -> None:
+    """With lr 0 the update must see exactly the policy that acted: PPO's ratio is 1 (approx_kl 0,
+    clipfrac 0), and the log-probs it recomputes equal those the actions were sampled with
+    (behaviour_kl 0), also in later chunks where the transformer's acting window reaches back into the
+    previous chunk (episodes of up to 40 steps, chunks of 8, window 16)."""
+    from ovon.train import train
+
+    cfg = train_preset("tiny", algo="ppo", text_cache=table, max_updates=5, lr=0.0)
+    cfg = dataclasses.replace(cfg, policy=dataclasses.replace(cfg.policy, core=core))
+    train(cfg, specs, tmp_path / core)
+    rows = read_metrics(tmp_path / core)
+    assert len(rows) == 5
+    for r in rows:
+        assert abs(r["approx_kl"]) < 1e-7 and r["clipfrac"] == 0.0
+        assert r["behaviour_kl"] < 1e-6, r
+
+
+def test_without_the_context_prefix_the_update_reads_another_policy(tmp_path: Path, specs, table: str) -> None:
+    """The check above can fail: re-reading chunks alone gives the transformer a shorter context than it
+    acted with once episodes cross chunk boundaries."""
+    from ovon.train import train
+
+    cfg = train_preset("tiny", algo="ppo", text_cache=table, max_updates=5, lr=0.0)
+    cfg = dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, context_prefix=False))
+    train(cfg, specs, tmp_path / "noprefix")
+    rows = read_metrics(tmp_path / "noprefix")
+    assert rows[0]["behaviour_kl"] < 1e-6  # the first chunk starts every episode: same context
+    assert max(r["behaviour_kl"] for r in rows[1:]) > 1e-6
+
+
+def test_anchor_weight_decays_linearly() -> None:
+    ft = FinetuneConfig(anchor="kl", anchor_coef=2.0, anchor_decay_updates=100, scale=0.5)
+    assert anchor_weight(ft, 0) == 2.0
+    assert anchor_weight(ft, 25) == pytest.approx(1.0)
+    assert anchor_weight(ft, 50) == 0.0 and anchor_weight(ft, 80) == 0.0
+    assert anchor_weight(dataclasses.replace(ft, anchor_decay_updates=0), 10_000) == 2.0
+    assert anchor_weight(dataclasses.replace(ft, anchor="none"), 0) == 0.0
+
+
+def test_kl_to() -> None:
+    a = torch.randn(3, 5, 4)
+    assert kl_to(a, a).item() == pytest.approx(0.0, abs=1e-7)
+    assert kl_to(a, torch.zeros_like(a)).item() > 0
+
+
+@pytest.mark.parametrize("anchor", ["kl", "expert"])
+def test_finetune_anchor_keeps_the_initial_policy(tmp_path: Path, specs, table: str, anchor: str) -> None:
+    """The anchor term is on from the first update; KL to the initial policy is 0 before the actor moves."""
+    from ovon.train import train
+
+    dag = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table)
+    train(dag, specs, tmp_path / "dagger")
+    ft = dataclasses.replace(dag, algo="ppo", max_updates=3,
+                             finetune=FinetuneConfig(anchor=anchor, anchor_coef=0.5, anchor_decay_updates=4,
+                                                     actor_unfreeze=0, actor_warmup_end=0, actor_lr=1e-3))
+    train(ft, specs, tmp_path / "ft", init=str(tmp_path / "dagger"))
+    rows = read_metrics(tmp_path / "ft")
+    assert [r["anchor/weight"] for r in rows] == [0.5, 0.375, 0.25]
+    assert all(np.isfinite(r["anchor_loss"]) and r["anchor_loss"] >= 0 for r in rows)
+    assert rows[0]["lr/actor"] == 1e-3
+    if anchor == "kl":
+        assert rows[0]["anchor_loss"] < 1e-3  # ~0: the actor starts as the reference (one minibatch moves it)
+    else:
+        assert rows[0]["anchor_loss"] > 0.1  # cross-entropy to the labels
+
+
+def test_critic_warmup_gate_holds_the_actor(tmp_path: Path, specs, table: str) -> None:
+    from ovon.train import train
+
+    dag = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table)
+    train(dag, specs, tmp_path / "dagger")
+    ft = dataclasses.replace(dag, algo="ppo", max_updates=3,
+                             finetune=FinetuneConfig(actor_unfreeze=0, actor_warmup_end=0, actor_lr=1e-3,
+                                                     critic_warmup_ev=0.999))
+    train(ft, specs, tmp_path / "ft", init=str(tmp_path / "dagger"))
+    rows = read_metrics(tmp_path / "ft")
+    assert all(r["lr/actor"] == 0.0 and r["actor_gate_open"] == 0.0 for r in rows)
+    assert all("explained_variance" in r for r in rows)
