@@ -24,7 +24,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q -x --durations=15
 
 test-slow: $(STAMP)
-	$(PY) -m pytest -q -m slow
+	$(PY) -m pytest -q -m slow --durations=0
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check ovon tests benchmarks

@@ -1,8 +1,11 @@
 """Every command and code block of the README runs as written.
 
 The blocks run in README order in one temporary folder (so later blocks use what earlier ones made),
-shell blocks with `bash -euo pipefail`, Python blocks as scripts, with an `ovon` on PATH that runs this
-checkout. Three documented departures keep it to minutes on a 2-core machine:
+shell blocks with `bash -euo pipefail`, Python blocks as scripts, in exactly the environment the README
+tells a newcomer to make (`source .venv/bin/activate`): the venv's `bin` (its `ovon`, `python`) first on
+PATH, no PYTHONPATH, and a `.venv` link to the venv in the folder, so that line itself runs as written.
+The venv must be this checkout's (`make install`). Three documented departures keep it to minutes on a
+2-core machine:
 
 - SHRINK: sizes are substituted (scene counts, episodes per scene / split / run, seeds, render size,
   `--preset cpu-small` -> `tiny`, bench steps); the commands, options and code are otherwise unchanged.
@@ -12,8 +15,8 @@ checkout. Three documented departures keep it to minutes on a 2-core machine:
   folder, so their JSON never overwrites the committed results.
 
 A Python block preceded by "Save the class below as `X.py`" is also written to `X.py`, and is run as a
-module rather than as `__main__` (its main guard may start a server that a later block uses). `python` on
-PATH is this interpreter.
+module rather than as `__main__` (its main guard may start a server that a later block uses). `python` and
+`ovon` on PATH are the venv's (this interpreter's).
 """
 
 from __future__ import annotations
@@ -63,24 +66,31 @@ def readme_blocks(text: str) -> list[tuple[str, str, str]]:
     return out
 
 
-def _env(bin_dir: Path) -> dict:
-    env = dict(os.environ)
-    env["PATH"] = f"{bin_dir}{os.pathsep}{env.get('PATH', '')}"
-    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+VENV_BIN = Path(sys.executable).parent  # .venv/bin when the suite runs as `make test` does
+
+
+def newcomer_env(cwd: Path) -> dict:
+    """What `source .venv/bin/activate` gives in the repository root: the venv's bin first on PATH (so
+    `python` and `ovon` are the venv's), VIRTUAL_ENV set, no PYTHONPATH; `cwd/.venv` links to the venv."""
+    if not (VENV_BIN / "ovon").exists() or sys.prefix == sys.base_prefix:
+        pytest.fail(f"{sys.executable} is not a virtual environment with `ovon` installed; run the README test "
+                    "with the project's venv (`make install`, then `.venv/bin/pytest` or `make test-slow`)")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+    env["PATH"] = f"{VENV_BIN}{os.pathsep}{env.get('PATH', '')}"
+    env["VIRTUAL_ENV"] = sys.prefix
     env.setdefault("OMP_NUM_THREADS", "1")
     env.setdefault("LP_NUM_THREADS", "0")
     env["MPLBACKEND"] = "Agg"
+    link = cwd / ".venv"
+    if not link.exists():
+        link.symlink_to(sys.prefix, target_is_directory=True)
+    res = subprocess.run(["python", "-c", "import ovon; print(ovon.__file__)"], cwd=cwd, env=env,
+                         capture_output=True, text=True, timeout=120)
+    where = Path(res.stdout.strip() or "?").resolve()
+    assert res.returncode == 0 and ROOT.resolve() in where.parents, (
+        f"the venv's python imports ovon from {where}, not from this checkout {ROOT}: run `make install` here "
+        f"({res.stderr[-500:]})")
     return env
-
-
-def _shim(tmp: Path) -> Path:
-    bin_dir = tmp / "_bin"
-    bin_dir.mkdir()
-    for name, target in (("ovon", f'"{sys.executable}" -m ovon.cli.main'), ("python", f'"{sys.executable}"')):
-        shim = bin_dir / name
-        shim.write_text(f'#!/bin/sh\nexec {target} "$@"\n')
-        shim.chmod(0o755)
-    return bin_dir
 
 
 def _shell(code: str) -> str:
@@ -100,9 +110,9 @@ def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: 
             (cwd / saved.group(1)).write_text(code)
         script = cwd / "_block.py"
         script.write_text(code)
-        cmd = [sys.executable, str(script)]
+        cmd = ["python", str(script)]  # the `python` on the newcomer's PATH (the venv's)
         if saved:
-            cmd = [sys.executable, "-c", "import runpy, sys; runpy.run_path(sys.argv[1], run_name='readme_block')",
+            cmd = ["python", "-c", "import runpy, sys; runpy.run_path(sys.argv[1], run_name='readme_block')",
                    str(script)]
     elif lang in ("shell", "bash", "sh", "console"):
         script = cwd / "_block.sh"
@@ -136,14 +146,14 @@ def test_readme_python_env_example_runs(tmp_path):
     assert "gym.make" in head
     script = tmp_path / "env_example.py"
     script.write_text(head)
-    res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(tmp_path), capture_output=True,
+    res = subprocess.run(["python", str(script)], cwd=tmp_path, env=newcomer_env(tmp_path), capture_output=True,
                          text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
 
 
 @pytest.mark.slow
 def test_every_readme_block_runs_as_written(tmp_path):
-    env = _env(_shim(tmp_path))
+    env = newcomer_env(tmp_path)
     # `python benchmarks/X.py OUT` lines run this checkout's scripts; their JSON lands in the temp copy.
     shutil.copytree(ROOT / "benchmarks", tmp_path / "benchmarks", ignore=shutil.ignore_patterns("results"))
     (tmp_path / "benchmarks" / "results").mkdir()

@@ -46,6 +46,9 @@ def register(sub) -> None:
     p.add_argument("--workers", default=min(2, os.cpu_count() or 1))
     p.add_argument("--executor", choices=["process", "ray"], default="process")
     p.add_argument("--name", help="row name in tables (default: the agent name)")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse a split holding an invalid episode (one line naming the file and the episode) "
+                        "instead of skipping it with a counted warning")
     p.add_argument("--out", required=True, help="run folder (episodes.jsonl, summary.json, table.md)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_evaluate)
@@ -139,6 +142,7 @@ def eval_config(args) -> EvalConfig:
         "workers": args.workers,
         "executor": args.executor,
         "name": args.name,
+        "strict": args.strict,
     })
     if args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
@@ -193,7 +197,9 @@ def cmd_evaluate(args) -> int:
         summary = evaluate(eval_config(args), args.out, progress=not args.no_progress)
     print((Path(args.out) / "table.md").read_text(), end="")
     n = sum(s["episodes"] for s in summary["splits"].values())
-    print(f"{n} episodes; run folder: {args.out}")
+    skipped = sum((s.get("skipped") or {}).get("count", 0) for s in summary["splits"].values())
+    note = f" ({skipped} skipped before the run, see above)" if skipped else ""
+    print(f"{n} episodes{note}; run folder: {args.out}")
     return 0
 
 

@@ -5,9 +5,35 @@ from __future__ import annotations
 import math
 import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from ovon.config.base import Domain, Pattern, constrained, in_range, non_negative
+
+# A pose is metres around the scene's origin (and a yaw in degrees): far beyond this is a typo.
+POSE_LIMIT = 1e5
+
+
+@dataclass(frozen=True)
+class PoseDomain(Domain):
+    def accepts(self, value) -> bool:  # noqa: ANN001 - a tuple of 4 floats (the type is checked first)
+        return all(abs(x) <= POSE_LIMIT for x in value)
+
+    def describe(self, noun: str) -> str:
+        return f"x,y,z,yaw_deg (four numbers within ±{POSE_LIMIT:g})"
+
+
+@dataclass(frozen=True)
+class ViewArgs:
+    """`ovon sim view`'s own options through declared domains (one-line errors naming the option)."""
+
+    pose: tuple[float, float, float, float] | None = constrained(None, PoseDomain(), flag="--pose")
+    pitch: float = in_range(0.0, -90.0, 90.0, flag="--pitch")
+    seed: int = non_negative(0, flag="--seed")
+    out: str = constrained("", Pattern(r"(?s).*[^/\\]\.[pP][nN][gG]", "the path of a .png file, e.g. frame.png"),
+                           flag="--out")
 
 
 def _camera_args(p) -> None:
@@ -28,10 +54,10 @@ def register(sub) -> None:
     v._negative_number_matcher = re.compile(r"^-\d[\d.,eE+-]*$")
     v.add_argument("--pose", help="x,y,z,yaw_deg of the agent's feet (default: a random navigable pose)")
     v.add_argument("--up", default=None, metavar="AXIS", help="up axis of a scan / bare mesh (y, z, -z, ...)")
-    v.add_argument("--pitch", type=float, default=0.0, help="camera pitch in degrees, > 0 looks up")
-    v.add_argument("--seed", type=int, default=0, help="seed of the random pose")
+    v.add_argument("--pitch", default=0.0, help="camera pitch in degrees in [-90, 90], > 0 looks up")
+    v.add_argument("--seed", default=0, help="seed of the random pose")
     _camera_args(v)
-    v.add_argument("--out", required=True, help="output PNG")
+    v.add_argument("--out", required=True, help="output .png path")
     v.set_defaults(func=cmd_view)
 
     b = gs.add_parser("bench", help="env steps/s (random moves and turns, auto-reset; depth, semantic and RGB "
@@ -70,16 +96,6 @@ def _camera(args):
         raise ConfigError(msg) from None
 
 
-def _parse_pose(text: str) -> tuple[np.ndarray, float]:
-    try:
-        vals = [float(x) for x in text.split(",")]
-    except ValueError:
-        vals = []
-    if len(vals) != 4:
-        raise ValueError(f"--pose {text!r}: expected x,y,z,yaw_deg (four numbers)")
-    return np.array(vals[:3], dtype=np.float64), math.radians(vals[3])
-
-
 def colorize_depth(depth: np.ndarray, max_depth: float) -> np.ndarray:
     """Depth (metres, 0 = no hit) to an RGB image with the turbo colormap; no hit is black."""
     import cv2
@@ -104,20 +120,25 @@ def colorize_semantic(semantic: np.ndarray, seed: int = 0) -> np.ndarray:
 def cmd_view(args) -> int:
     from PIL import Image
 
+    from ovon.config.base import ConfigError, from_args
     from ovon.config.sim import SimConfig
     from ovon.sim.render import make_renderer
     from ovon.sim.world import load_scene_any
 
+    a = from_args(ViewArgs, args)
+    if Path(a.out).is_dir():
+        raise ConfigError(f"--out {a.out!r} is a folder; expected the path of a .png file; fix: e.g. "
+                          f"--out {Path(a.out) / 'frame.png'}")
     cam = _camera(args)
     scene = load_scene_any(args.scene, up=args.up)
-    if args.pose:
-        pos, yaw = _parse_pose(args.pose)
+    if a.pose is not None:
+        pos, yaw = np.array(a.pose[:3], dtype=np.float64), math.radians(a.pose[3])
     else:
         from ovon.sim.navgrid import build_navigation
 
         sim = SimConfig(camera=cam)
         nav = build_navigation(scene, sim.agent, sim.nav)
-        rng = np.random.default_rng(args.seed)
+        rng = np.random.default_rng(a.seed)
         grids = [g for g in nav.floors if g.navigable.any()]
         if not grids:
             raise ValueError(f"scene {args.scene!r} has no navigable area for a random pose; pass --pose x,y,z,yaw "
@@ -127,18 +148,18 @@ def cmd_view(args) -> int:
     renderer = make_renderer(scene, cam)
     try:
         eye = pos + np.array([0.0, cam.camera_height, 0.0])
-        frame = renderer.render(eye, yaw, math.radians(args.pitch))
+        frame = renderer.render(eye, yaw, math.radians(a.pitch))
     finally:
         renderer.close()
     panel = np.concatenate(
         [frame.rgb, colorize_depth(frame.depth, cam.max_depth), colorize_semantic(frame.semantic)], axis=1
     )
-    out = Path(args.out)
+    out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray(panel).save(out)
     n_ids = len(np.unique(frame.semantic[frame.semantic > 0]))
     print(f"pose x={pos[0]:.3f} y={pos[1]:.3f} z={pos[2]:.3f} yaw={math.degrees(yaw):.1f} deg "
-          f"pitch={args.pitch:.1f} deg; {n_ids} instances in view")
+          f"pitch={a.pitch:.1f} deg; {n_ids} instances in view")
     print(f"wrote {out} ({panel.shape[1]}x{panel.shape[0]}: rgb | depth | semantic)")
     return 0
 

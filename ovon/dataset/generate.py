@@ -10,13 +10,17 @@ Pipeline (one job per scene, in worker processes or Ray tasks):
    split's budget spread over (scene, category) pairs, i.e. over categories in proportion to how many
    scenes contain them), starts sampled, the shard written atomically.
 A re-run skips every file already written; the same seed gives byte-identical shards.
+A scene that yields no episode (no navigable floor, no goal object, no start) is named with its reason:
+a warning counted in `generation_report.json` when other scenes yield, an error when none does.
 """
 
 from __future__ import annotations
 
 import gzip
 import json
+import shutil
 import time
+import warnings
 import zlib
 from collections import Counter
 from dataclasses import dataclass, field
@@ -28,7 +32,7 @@ from ovon.atomic import atomic_write_text, write_json_gz
 from ovon.config.base import from_dict, to_dict
 from ovon.config.dataset import GenerationConfig
 from ovon.config.sim import AgentConfig, CameraConfig, NavConfig
-from ovon.dataset.generation_folder import generation_run_folder
+from ovon.dataset.generation_folder import EmptyGenerationError, generation_run_folder
 from ovon.dataset.io import SPLITS, shard_exists, write_scene_shard, write_split_shell
 from ovon.dataset.records import Episode, ObjectGoal, ViewPoint, goal_key
 from ovon.geometry import quat_to_yaw, yaw_to_quat
@@ -74,7 +78,15 @@ def scene_categories(ref: SceneRef) -> set[str]:
             f"scene {ref.folder} has no semantic annotations ({ref.stem}.semantic.txt + {ref.stem}.semantic.glb): "
             "ObjectNav episodes need them; add them or move the scene out of the scenes folder"
         )
-    return {c for e in parse_semantic_txt(txt) if (c := vocab.clean(e.raw_label))}
+    from ovon.scenes.hm3dsem.errors import SceneFileError
+    from ovon.scenes.hm3dsem.semantic_txt import SEMANTIC_HEADER, SEMANTIC_LINE_FORMAT
+
+    entries = parse_semantic_txt(txt)
+    if not entries:
+        raise SceneFileError(txt, "holds no annotated instance (ObjectNav episodes need the scene's objects)",
+                             f"fix: expected a first line '{SEMANTIC_HEADER}', then {SEMANTIC_LINE_FORMAT} per "
+                             "instance; restore the file or move the scene out of the scenes folder")
+    return {c for e in entries if (c := vocab.clean(e.raw_label))}
 
 
 def _rng(seed: int, *parts: str) -> np.random.Generator:
@@ -134,7 +146,17 @@ def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str],
             )
     finally:
         renderer.close()
-    return {"goals": goals, "not_goal_reasons": dict(sorted(reasons.items()))}
+    return {"goals": goals, "not_goal_reasons": dict(sorted(reasons.items())),
+            "floor_m2": round(start_area(nav, cfg.starts.min_island_radius), 2)}
+
+
+def start_area(nav, min_island_radius: float) -> float:  # noqa: ANN001 - a SceneNav
+    """Navigable area (m^2) where starts may lie: islands of radius >= `min_island_radius`, off furniture."""
+    area = 0.0
+    for g in nav.floors:
+        ok = np.flatnonzero((g.island_radius >= min_island_radius) & ~g.elevated())
+        area += float((np.isin(g.islands, ok) & g.navigable).sum()) * g.cell_size**2
+    return area
 
 
 def _goal_cache_path(out: Path, ref: SceneRef) -> Path:
@@ -286,6 +308,49 @@ class GenerationReport:
     rejections: Counter = field(default_factory=Counter)
     dropped: list = field(default_factory=list)
     goal_seconds: list = field(default_factory=list)
+    without_episodes: dict = field(default_factory=dict)  # "<kind>/<scene folder>" -> why it yields none
+
+
+def _no_goal_reason(g: dict) -> str:
+    """Why a scene's goal cache holds no goal (`compute_goals`)."""
+    if g.get("floor_m2") == 0:
+        a = AgentConfig()
+        return (f"no navigable floor for the agent (radius {a.radius} m, height {a.height} m; furniture tops and "
+                "tiny islands aside): check the scene's up axis, scale and face winding with `ovon scenes inspect`")
+    reasons = g.get("not_goal_reasons") or {}
+    if not reasons:
+        return "none of its objects is of a category of the requested splits"
+    return "no object can be a goal (" + ", ".join(f"{n} {k}" for k, n in sorted(reasons.items())) + ")"
+
+
+def _without_episodes(report: GenerationReport, active: list[SceneRef], scenes_dir: Path, out: Path,
+                      existed: set[str], final: bool) -> None:
+    """Name the scenes that yield no episode: an error when no scene of a kind the splits need (train or
+    val) yields, the generation then leaving none of the files it created; else, once `final`, one warning
+    (they are counted in the report)."""
+    bad = report.without_episodes
+    if not bad:
+        return
+
+    def named(scenes: list[str]) -> str:
+        by_reason: dict[str, list[str]] = {}
+        for scene in sorted(scenes):
+            by_reason.setdefault(bad[scene], []).append(scene)
+        return "; ".join(f"{', '.join(sc[:3])}{f' and {len(sc) - 3} more' if len(sc) > 3 else ''}: {why}"
+                         for why, sc in by_reason.items())
+
+    for kind in sorted({r.kind for r in active}):
+        scenes = [f"{r.kind}/{Path(r.folder).name}" for r in active if r.kind == kind]
+        if all(sc in bad for sc in scenes):
+            for p in out.iterdir():
+                if p.name not in existed:
+                    shutil.rmtree(p) if p.is_dir() else p.unlink()
+            raise EmptyGenerationError(
+                f"no {kind} scene of {scenes_dir} yields an episode: {named(scenes)}; fix: repair those scenes or "
+                "pass a scenes folder whose scenes have a navigable floor and annotated objects")
+    if final:
+        warnings.warn(f"{len(bad)} of {len(active)} scenes of {scenes_dir} yield no episode (counted in "
+                      f"generation_report.json): {named(list(bad))}", stacklevel=3)
 
 
 @generation_run_folder  # identity, resume check and lock of the output folder (ovon.runfolder)
@@ -310,13 +375,25 @@ def generate(
     t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    existed = {p.name for p in out.iterdir()}
     refs = discover_scenes(scenes_dir)
+    kinds = {"train"} if splits == ("train",) else ({"val"} if "train" not in splits else {"train", "val"})
+    for kind in sorted(kinds):
+        if not any(r.kind == kind for r in refs):
+            need = [s for s in splits if (s == "train") == (kind == "train")]
+            raise EmptyGenerationError(f"{scenes_dir} has no {kind} scenes (expected {Path(scenes_dir) / kind}/"
+                                       f"<NNNNN-id>/) for the split(s) {need}; fix: add scene folders there or "
+                                       "leave those splits out (--split)")
     cats_by_scene = {r.stem: scene_categories(r) for r in refs}
     cat_path = Path(category_split_path) if category_split_path else out / "categories.json"
     if cat_path.exists():
         csplit = load_category_split(cat_path)
     else:
         all_cats = sorted(set().union(*cats_by_scene.values()))
+        if not all_cats:
+            raise EmptyGenerationError(f"no scene of {scenes_dir} has an annotated object of a known category (their "
+                                       "semantic.txt labels are all dropped by the cleaning table, e.g. wall, floor); "
+                                       "fix: pass scenes annotated with object labels")
         sc = cfg.splits
         csplit = split_categories(all_cats, SplitConfig(seed=sc.seed, holdout_fraction=sc.holdout_fraction,
                                                         similarity_threshold=sc.similarity_threshold))
@@ -332,7 +409,6 @@ def generate(
     atomic_write_text(out / "generation_config.json", json.dumps(to_dict(cfg), indent=2, sort_keys=True))
     report = GenerationReport(scenes=len(refs))
     cfg_d = to_dict(cfg)
-    kinds = {"train"} if splits == ("train",) else ({"val"} if "train" not in splits else {"train", "val"})
     active = [r for r in refs if r.kind in kinds]
     wanted = sorted(set().union(*(split_cats[s] for s in splits)))
 
@@ -346,6 +422,10 @@ def generate(
     goals = {r.stem: load_goal_cache(out, r) for r in active}
     for g in goals.values():
         report.not_goal_reasons.update(g["not_goal_reasons"])
+    name = {r.stem: f"{r.kind}/{Path(r.folder).name}" for r in active}
+    report.without_episodes = {name[r.stem]: _no_goal_reason(goals[r.stem]) for r in active
+                               if not goals[r.stem]["goals"]}
+    _without_episodes(report, active, Path(scenes_dir), out, existed, final=False)
 
     # phase 2: allocation + starts
     ep_jobs = []
@@ -363,13 +443,27 @@ def generate(
             ep_jobs.append({"ref": r.__dict__, "out": str(out), "cfg": cfg_d, "split": split,
                             "allocation": allocs[r.stem], "children": children[split]})
         write_split_shell(out, split)
+    allocated = {(j["ref"]["stem"], j["split"]): j["allocation"] for j in ep_jobs}
+    yielded: dict[str, bool] = {}  # stem -> an episode (or a shard from an earlier session), False: none
+    failed: dict[str, Counter] = {}
     with progress_bar("episodes (scene x split)", len(ep_jobs), progress) as bar:
-        for res in run_jobs(episodes_job, ep_jobs, workers, executor):
+        for res in run_jobs(episodes_job, ep_jobs, workers, executor):  # in completion order
             if not res["cached"]:
                 report.episodes[res["split"]] = report.episodes.get(res["split"], 0) + res["episodes"]
                 report.rejections.update(res["rejections"])
                 report.dropped += [(res["stem"], res["split"], c) for c in res["dropped_categories"]]
+            stem = res["stem"]
+            if res["cached"] or res["episodes"]:
+                yielded[stem] = True
+            elif any(allocated[(stem, res["split"])].values()):
+                yielded.setdefault(stem, False)
+                failed.setdefault(stem, Counter()).update(res["rejections"])
             bar.advance()
+    for stem, ok in sorted(yielded.items()):
+        if not ok:
+            why = ", ".join(f"{n} {k}" for k, n in sorted(failed[stem].items())) or "none"
+            report.without_episodes[name[stem]] = f"no start could be sampled for its goals (rejections: {why})"
+    _without_episodes(report, active, Path(scenes_dir), out, existed, final=True)
     report.seconds = time.perf_counter() - t0
     summary = {
         "seconds": round(report.seconds, 2),
@@ -379,6 +473,7 @@ def generate(
         "start_rejections": dict(report.rejections),
         "dropped_categories": report.dropped,
         "goal_seconds_per_scene": report.goal_seconds,
+        "scenes_without_episodes": dict(sorted(report.without_episodes.items())),
     }
     atomic_write_text(out / "generation_report.json", json.dumps(summary, indent=2, sort_keys=True))
     return report

@@ -15,7 +15,14 @@ from pathlib import Path
 from typing import Any
 
 from ovon.config.base import ConfigError, to_dict, validate
+from ovon.dataset.records import DatasetError
 from ovon.runfolder import RunFolder, file_sha256, listing_sha256, path_identity
+
+
+class EmptyGenerationError(DatasetError):
+    """A generation that yields no episode at all (e.g. no scene has a navigable floor): it removes the files
+    it created, so a corrected re-run into the same folder starts afresh."""
+
 
 KIND = "dataset"
 # Which splits a session generates, and how fast, may change between sessions of one dataset folder.

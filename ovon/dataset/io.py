@@ -33,6 +33,7 @@ SPLIT_ALIASES: dict[str, str] = {
     "val_unseen": "val_unseen_hard",
 }
 SHARD_SUFFIX = ".json.gz"
+RECORD_FIX = "fix: correct that value in the file, or regenerate it with `ovon dataset generate`"
 # A split is a folder under the dataset root: a plain name, never a path that could leave the root.
 SPLIT_NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.-]*"
 
@@ -118,7 +119,7 @@ def read_shard(path: str | Path, require_goals: bool = True) -> SceneEpisodes:
     try:
         return parse_shard(doc, require_goals=require_goals)
     except DatasetError as e:
-        raise DatasetError(f"{path}: {e}") from None
+        raise DatasetError(f"{path}: {e}; {RECORD_FIX}") from None
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -186,7 +187,7 @@ class EpisodeDataset:
         try:
             return parse_shard(doc, require_goals=False)
         except DatasetError as e:
-            raise DatasetError(f"{self.shell_path}: {e}") from None
+            raise DatasetError(f"{self.shell_path}: {e}; {RECORD_FIX}") from None
 
     def scenes(self) -> list[str]:
         """Scene names with a shard, sorted; `._*` AppleDouble files are skipped with a warning."""

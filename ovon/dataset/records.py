@@ -38,6 +38,19 @@ def _numbers(v: Any, n: int, where: str) -> list[float]:
     return out
 
 
+# Scene coordinates are metres around the scene's origin (HM3D scans span tens of metres): a position far
+# beyond this is a corrupt value, refused here rather than overflowing a grid index later.
+MAX_COORDINATE = 1e5
+
+
+def _position(v: Any, where: str) -> list[float]:
+    out = _numbers(v, 3, where)
+    if any(abs(x) > MAX_COORDINATE for x in out):
+        raise DatasetError(f"{where}: expected 3 coordinates within ±{MAX_COORDINATE:g} m of the scene's origin, "
+                           f"got {_short(v)}")
+    return out
+
+
 def _number(v: Any, where: str) -> float:
     if not isinstance(v, int | float) or isinstance(v, bool) or not math.isfinite(v):
         raise DatasetError(f"{where}: expected a number, got {_short(v)}")
@@ -103,7 +116,7 @@ class ViewPoint:
         w = f"{where}.agent_state"
         state = _dict(_req(d, "agent_state", where), w)
         return cls(
-            position=_numbers(_req(state, "position", w), 3, f"{w}.position"),
+            position=_position(_req(state, "position", w), f"{w}.position"),
             rotation=_numbers(_req(state, "rotation", w), 4, f"{w}.rotation"),
             iou=_number(_req(d, "iou", where), f"{where}.iou"),
         )
@@ -155,7 +168,7 @@ class ObjectGoal:
         return cls(
             object_category=_str(_req(d, "object_category", where), f"{where}.object_category"),
             object_id=_str(object_id, f"{where}.object_id"),
-            position=_numbers(_req(d, "position", where), 3, f"{where}.position"),
+            position=_position(_req(d, "position", where), f"{where}.position"),
             view_points=[ViewPoint.from_dict(v, f"{where}.view_points[{i}]") for i, v in enumerate(vps)],
             extra={k: v for k, v in d.items() if k not in _GOAL_KEYS},
         )
@@ -234,7 +247,7 @@ class Episode:
         return cls(
             episode_id=episode_id,  # type: ignore[arg-type]  # kept as written
             scene_id=_str(_req(d, "scene_id", where), f"{where}.scene_id"),
-            start_position=_numbers(_req(d, "start_position", where), 3, f"{where}.start_position"),
+            start_position=_position(_req(d, "start_position", where), f"{where}.start_position"),
             start_rotation=_numbers(_req(d, "start_rotation", where), 4, f"{where}.start_rotation"),
             object_category=_str(_req(d, "object_category", where), f"{where}.object_category"),
             scene_dataset_config=_str(d.get("scene_dataset_config", ""), f"{where}.scene_dataset_config"),

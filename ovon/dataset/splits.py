@@ -116,7 +116,9 @@ class CategorySplit:
                 model=str(doc.get("model", MODEL_NAME)),
             )
         except (KeyError, TypeError, ValueError) as e:
-            raise DatasetError(f"{source}: malformed category split ({type(e).__name__}: {e})") from None
+            raise DatasetError(f"{source}: malformed category split ({type(e).__name__}: {e}); expected lists train, "
+                               "val_seen_synonyms and val_unseen; fix: pass a categories.json written by "
+                               "`ovon dataset splits`") from None
 
     def save(self, path: str | Path) -> Path:
         """Write `categories.json` atomically."""

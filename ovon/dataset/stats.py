@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
-import json
+import math
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from ovon.dataset.io import HELD_OUT_SPLITS, EpisodeDataset
+from ovon.dataset.records import DatasetError
+from ovon.dataset.splits import load_category_split
 
 HIST_EDGES = (0, 2, 4, 6, 8, 10, 15, 20, 30)
 
@@ -25,11 +27,11 @@ def split_stats(root: str | Path, split: str) -> dict:
         n = len(shard.episodes)
         episodes += n
         scenes_with_eps += n > 0
-        for ep in shard.episodes:
+        for i, ep in enumerate(shard.episodes):
             cats[ep.object_category] += 1
             g = (ep.info or {}).get("geodesic_distance")
             if g is not None:
-                geo.append(float(g))
+                geo.append(_distance(g, f"{ds.shard_path(scene)}: episode {str(ep.episode_id)!r} (episodes[{i}])"))
         for goals in shard.goals_by_category.values():
             for g in goals:
                 instances.add((scene, g.object_id))
@@ -54,6 +56,14 @@ def split_stats(root: str | Path, split: str) -> dict:
     }
 
 
+def _distance(value: object, where: str) -> float:
+    """A stored geodesic distance, or one line naming the episode (a string or NaN cannot be averaged)."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
+        raise DatasetError(f"{where}: info.geodesic_distance = {value!r}: expected a finite number >= 0 (metres); "
+                           "fix: correct or remove the episode (`ovon dataset validate` lists every problem)")
+    return float(value)
+
+
 def dataset_stats(root: str | Path) -> dict:
     root = Path(root)
     if not root.is_dir():
@@ -64,14 +74,14 @@ def dataset_stats(root: str | Path) -> dict:
     out: dict = {"splits": {s: split_stats(root, s) for s in splits}}
     cat_file = root / "categories.json"
     if cat_file.exists():
-        doc = json.loads(cat_file.read_text())
+        split = load_category_split(cat_file)
         for s in HELD_OUT_SPLITS:
-            sims = [h["max_similarity"] for h in doc.get(s, [])]
-            if sims:
+            rng = split.similarity_range(s)
+            if rng:
                 out.setdefault("category_split", {})[s] = {
-                    "categories": len(sims), "similarity_min": min(sims), "similarity_max": max(sims)
+                    "categories": len(split.categories(s)), "similarity_min": rng[0], "similarity_max": rng[1]
                 }
-        out.setdefault("category_split", {})["train"] = {"categories": len(doc.get("train", []))}
+        out.setdefault("category_split", {})["train"] = {"categories": len(split.train)}
     return out
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import typing
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -34,7 +35,15 @@ from ovon.config.base import (
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
 from ovon.dataset.io import SPLIT_NAME_PATTERN, VAL_SPLITS
-from ovon.evaluate.results import RecordWriter, paper_table, read_records, record_key, summarize, write_canonical
+from ovon.evaluate.results import (
+    RecordWriter,
+    coverage_lines,
+    paper_table,
+    read_records,
+    record_key,
+    summarize,
+    write_canonical,
+)
 from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
@@ -42,7 +51,7 @@ SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
 MAY_CHANGE = ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "chunk", "name",
-              "agent_kwargs.checkpoint", "remote.timeout_s", "remote.batch", "remote.allow_privileged")
+              "agent_kwargs.checkpoint", "remote.timeout_s", "remote.batch", "remote.allow_privileged", "strict")
 
 
 @dataclass
@@ -61,6 +70,7 @@ class EvalConfig:
     task: TaskConfig = field(default_factory=TaskConfig)
     name: str | None = non_empty(None, flag="--name")  # row name in tables; default = agent (its own name if remote)
     remote: RemoteConfig = field(default_factory=RemoteConfig)  # --agent remote:HOST:PORT only
+    strict: bool = False  # refuse a split holding an invalid episode instead of skipping it (counted)
 
 
 def parse_noise(spec: str | None) -> NoiseConfig:
@@ -107,16 +117,30 @@ def apply_overrides(cfg: EvalConfig, overrides: list[str]) -> EvalConfig:
     return dataclasses.replace(cfg, **groups)
 
 
-def load_specs(data: str, scenes: str, split: str, limit: int | None) -> list[EpisodeSpec]:
-    """Episodes of a split as `EpisodeSpec`s, spread round-robin over scenes when limited.
+@dataclass
+class SplitEpisodes:
+    """The episodes of one split a run picked: those it runs (`specs`, each with its `shards` file) and
+    those it skipped, counted by problem, so the summary can say "2998 of 3000 episodes"."""
 
-    Episodes that fail validation (`ovon.dataset.validate.usable_episodes`) are skipped with one counted
-    warning; a split without episodes, or a scene id outside `scenes`, is an error."""
-    from collections import Counter
+    specs: list[EpisodeSpec]
+    shards: list[str]  # the shard file of each spec (for messages)
+    picked: int  # episodes picked from the split (all, or the first `--episodes`), before skipping
+    skipped: Counter = field(default_factory=Counter)
 
+
+def strict_fix(data: str, scenes: str) -> str:
+    return (f"fix: correct or remove the episode (`ovon dataset validate {data} --scenes {scenes}` lists every "
+            "problem), or leave out --strict to skip invalid episodes with a counted warning")
+
+
+def load_split(data: str, scenes: str, split: str, limit: int | None, strict: bool = False) -> SplitEpisodes:
+    """The episodes of a split, round-robin over scenes, the first `limit` of them when limited; those
+    that fail validation (`ovon.dataset.validate.check_shard`) are skipped and counted, or with `strict`
+    refused (one line naming the file and the episode). A split without episodes, or a scene id outside
+    `scenes`, is an error."""
     from ovon.dataset.io import EpisodeDataset, goals_for
     from ovon.dataset.records import DatasetError, resolve_scene_path
-    from ovon.dataset.validate import split_problem, usable_episodes, warn_skipped
+    from ovon.dataset.validate import check_shard, split_problem
     from ovon.runfolder import path_identity
     from ovon.task.episode import spec_from_episode
 
@@ -125,36 +149,54 @@ def load_specs(data: str, scenes: str, split: str, limit: int | None) -> list[Ep
     if why:
         raise DatasetError(f"split {split!r}: {why}; fix: pass a dataset written by `ovon dataset generate` or "
                            "the released HM3D-OVON files")
-    per_scene: list[list[EpisodeSpec]] = []
-    skipped: Counter = Counter()
-    total = 0
+    per_scene: list[list[tuple]] = []  # (shard path, index, episode, problems, goals, scene path)
     for scene in ds.scenes():
         shard = ds.load_scene(scene)
+        where = str(ds.shard_path(scene))
         paths: dict[str, str] = {}
         for ep in shard.episodes:  # a scene id outside the root refuses the file, whatever else is wrong
             if ep.scene_id not in paths:
                 try:
                     paths[ep.scene_id] = path_identity(resolve_scene_path(ep.scene_id, scenes))
                 except DatasetError as e:
-                    raise DatasetError(f"{ds.shard_path(scene)}: episode {ep.episode_id!r}: {e}") from None
-        episodes, bad = usable_episodes(shard)
-        total += len(shard.episodes)
-        skipped.update(bad)
-        per_scene.append([spec_from_episode(ep, goals_for(ep, shard.goals_by_category), paths[ep.scene_id], split)
-                          for ep in episodes])
-    warn_skipped(f"{ds.content_dir}", skipped, total)
-    out = [p[i] for i in range(max(map(len, per_scene), default=0)) for p in per_scene if i < len(p)]
-    return out if limit is None else out[:limit]
+                    raise DatasetError(f"{where}: episode {ep.episode_id!r}: {e}") from None
+        chk = check_shard(shard)
+        per_scene.append([(where, i, ep, chk.episodes.get(i), shard.goals_by_category, paths[ep.scene_id])
+                          for i, ep in enumerate(shard.episodes)])
+    order = [p[i] for i in range(max(map(len, per_scene), default=0)) for p in per_scene if i < len(p)]
+    picked = order if limit is None else order[:limit]
+    out = SplitEpisodes([], [], len(picked))
+    for where, i, ep, problems, goals, path in picked:
+        if problems:
+            if strict:
+                raise DatasetError(f"{where}: episode {str(ep.episode_id)!r} (episodes[{i}]): {problems[0][1]}; "
+                                   f"{strict_fix(data, scenes)}")
+            out.skipped[problems[0][0]] += 1
+            continue
+        out.specs.append(spec_from_episode(ep, goals_for(ep, goals), path, split))
+        out.shards.append(where)
+    return out
 
 
-def drop_off_map_starts(specs: list[EpisodeSpec], sim: SimConfig, workers: int = 1,
-                        executor: str = "process", where: str = "") -> list[EpisodeSpec]:
-    """`specs` without the episodes whose start is off the navigable map of their scene (for this agent's
-    radius and the nav grid of `sim`), skipped with one counted warning. One job per scene."""
-    from collections import Counter
+def load_specs(data: str, scenes: str, split: str, limit: int | None) -> list[EpisodeSpec]:
+    """The runnable episodes of a split as `EpisodeSpec`s (`load_split`), the skipped ones in one counted
+    warning."""
+    from ovon.dataset.validate import warn_skipped
 
-    from ovon.dataset.validate import off_map_starts_job, warn_skipped
+    sel = load_split(data, scenes, split, limit)
+    warn_skipped(f"{Path(data) / split}", sel.skipped, sel.picked)
+    return sel.specs
 
+
+def drop_off_map_starts(sel: SplitEpisodes, sim: SimConfig, workers: int = 1, executor: str = "process",
+                        strict: bool = False, data: str = "", scenes: str = "") -> SplitEpisodes:
+    """`sel` without the episodes whose start is off the navigable map of their scene (for this agent's
+    radius and the nav grid of `sim`), counted as `start_off_map` (refused with `strict`). One job per
+    scene."""
+    from ovon.dataset.records import DatasetError
+    from ovon.dataset.validate import off_map_starts_job
+
+    specs = sel.specs
     by_scene: dict[str, list[int]] = {}
     for i, s in enumerate(specs):
         if s.start_position is not None:
@@ -167,8 +209,15 @@ def drop_off_map_starts(specs: list[EpisodeSpec], sim: SimConfig, workers: int =
     for res in run_jobs(off_map_starts_job, jobs, workers if many else 1, executor if many else "process"):
         idx = by_scene[res["scene"]]
         bad.update(idx[j] for j in res["bad"])
-    warn_skipped(where or "episodes", Counter({"start_off_map": len(bad)}), len(specs))
-    return [s for i, s in enumerate(specs) if i not in bad]
+    if bad and strict:
+        i = min(bad)
+        s = specs[i]
+        start = [round(float(x), 3) for x in s.start_position]
+        raise DatasetError(f"{sel.shards[i]}: episode {s.episode_id!r}: start {start} is not on the navigable map of "
+                           f"{s.scene} (agent radius {sim.agent.radius} m); {strict_fix(data, scenes)}")
+    keep = [i for i in range(len(specs)) if i not in bad]
+    skipped = sel.skipped + Counter({"start_off_map": len(bad)})
+    return SplitEpisodes([specs[i] for i in keep], [sel.shards[i] for i in keep], sel.picked, skipped)
 
 
 # -- worker side ---------------------------------------------------------------------------------
@@ -278,17 +327,15 @@ def run_inputs(cfg: EvalConfig) -> dict:
     return inputs
 
 
-def prepare(cfg: EvalConfig, workers: int | None = None) -> dict[str, list[EpisodeSpec]]:
-    """Everything that can refuse a run, before any episode: config domains, the agent, the episodes."""
-    return _prepare(cfg, workers)[0]
-
-
-def _prepare(cfg: EvalConfig, workers: int | None = None) -> tuple[dict[str, list[EpisodeSpec]], str]:
-    """`prepare`, and the row name: `--name`, else the name a remote agent introduces itself with, else
+def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> tuple[dict[str, SplitEpisodes], str]:
+    """Everything that can refuse a run, before any episode: config domains, the agent, the episodes
+    (invalid ones and starts off the map skipped with one counted warning per split, or refused with
+    `cfg.strict`); and the row name: `--name`, else the name a remote agent introduces itself with, else
     `--agent`."""
     from ovon.agents import check_agent
     from ovon.agents.remote import check_remote, is_remote
     from ovon.dataset.records import DatasetError
+    from ovon.dataset.validate import warn_skipped
 
     validate(cfg)
     if is_remote(cfg.agent):
@@ -296,22 +343,36 @@ def _prepare(cfg: EvalConfig, workers: int | None = None) -> tuple[dict[str, lis
     else:
         check_agent(cfg.agent, cfg.agent_kwargs)
         name = cfg.name or cfg.agent
-    specs_by_split = {}
+    out = {}
     for split in cfg.splits:
-        specs = load_specs(cfg.data, cfg.scenes, split, cfg.episodes)
-        specs = drop_off_map_starts(specs, cfg.sim, workers or cfg.workers, cfg.executor, f"{cfg.data}/{split}")
-        if not specs:
+        sel = load_split(cfg.data, cfg.scenes, split, cfg.episodes, cfg.strict)
+        sel = drop_off_map_starts(sel, cfg.sim, workers or cfg.workers, cfg.executor, cfg.strict, cfg.data,
+                                  cfg.scenes)
+        warn_skipped(f"{Path(cfg.data) / split}", sel.skipped, sel.picked)
+        if not sel.specs:
             raise DatasetError(f"split {split!r} in {cfg.data} has no usable episodes; fix: run `ovon dataset "
                                f"validate {cfg.data} --scenes {cfg.scenes}` to see why")
-        specs_by_split[split] = specs
-    return specs_by_split, name
+        out[split] = sel
+    return out, name
+
+
+def prepare(cfg: EvalConfig, workers: int | None = None) -> dict[str, list[EpisodeSpec]]:
+    """The episodes each split runs (`prepare_splits` without the skip counts and the name)."""
+    return {split: sel.specs for split, sel in prepare_splits(cfg, workers)[0].items()}
+
+
+def skip_counts(selected: dict[str, SplitEpisodes]) -> dict[str, dict]:
+    """Per split: episodes picked, and those skipped before the run by problem (for `finalize`)."""
+    return {split: {"picked": sel.picked, "count": sum(sel.skipped.values()),
+                    "reasons": dict(sorted(sel.skipped.items()))} for split, sel in selected.items()}
 
 
 def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
     from ovon.agents.remote import is_remote
     from ovon.runfolder import RunFolder
 
-    specs_by_split, name = _prepare(cfg)
+    selected, name = prepare_splits(cfg)
+    specs_by_split = {split: sel.specs for split, sel in selected.items()}
     run_dir = Path(run_dir)
     with RunFolder.open(run_dir, "evaluate", to_dict(cfg), run_inputs(cfg), may_change=MAY_CHANGE,
                         markers=("episodes.jsonl",)):
@@ -332,17 +393,26 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
                 release_agent()  # in-process runs: the connection closes with the run
         wanted = {(split, int(seed), s.scene, s.episode_id)
                   for seed in cfg.seeds for split, specs in specs_by_split.items() for s in specs}
-        return finalize(run_dir, name, wanted)
+        return finalize(run_dir, name, wanted, skip_counts(selected))
 
 
-def finalize(run_dir: str | Path, name: str, wanted: set | None = None) -> dict:
+def finalize(run_dir: str | Path, name: str, wanted: set | None = None, skipped: dict | None = None) -> dict:
     """episodes.jsonl in canonical order, then the summary and the table of the records in `wanted` (all
-    when None), in that order: identical whatever the workers, the executor or the interruptions."""
+    when None), in that order: identical whatever the workers, the executor or the interruptions.
+
+    `skipped` (`skip_counts`): per split, the episodes picked and those skipped before the run; written
+    into each split's summary entry, and under the table when any was skipped, so a published SR never
+    silently covers fewer episodes than the split."""
     run_dir = Path(run_dir)
     records = write_canonical(run_dir, read_records(run_dir))
     if wanted is not None:
         records = [r for r in records if record_key(r) in wanted]
     summary = {"name": name, "splits": summarize(records)}
+    for split, entry in summary["splits"].items():
+        if skipped and split in skipped:
+            entry["skipped"] = skipped[split]
     atomic_write_text(run_dir / "summary.json", json.dumps(summary, indent=2, sort_keys=True))
-    atomic_write_text(run_dir / "table.md", paper_table({name: summary["splits"]}) + "\n")
+    notes = coverage_lines(summary["splits"])
+    table = paper_table({name: summary["splits"]}) + "\n" + ("\n" + "".join(f"- {n}\n" for n in notes) if notes else "")
+    atomic_write_text(run_dir / "table.md", table)
     return summary

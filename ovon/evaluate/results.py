@@ -64,6 +64,11 @@ def record_problem(r: object) -> str | None:
             return f"{k} is not a finite number"
     if not (r.get("failure") is None or isinstance(r.get("failure"), str)):
         return "failure is not a string"
+    if not isinstance(r.get("category"), str):
+        return "category is not a string"
+    g = r.get("geodesic_distance")  # reports bin by it; an unreachable start may hold Infinity
+    if isinstance(g, bool) or not isinstance(g, int | float):
+        return "geodesic_distance is not a number"
     return None
 
 
@@ -204,6 +209,20 @@ def summarize(records: list[dict]) -> dict:
         entry["failures"] = dict(sorted(failures.items()))
         entry["episodes"] = sum(len(rs) for rs in seeds.values())
         out[split] = entry
+    return out
+
+
+def coverage_lines(splits: dict[str, dict]) -> list[str]:
+    """One line per split of a summary that skipped episodes before the run, e.g. "val_seen: 2998 of
+    3000 episodes (2 skipped: 1 rotation, 1 start_off_map; ...)": the table's SR covers the 2998."""
+    out = []
+    for split in sorted(splits, key=lambda s: (VAL_SPLITS.index(s) if s in VAL_SPLITS else len(VAL_SPLITS), s)):
+        sk = splits[split].get("skipped") or {}
+        if sk.get("count"):
+            reasons = ", ".join(f"{n} {k}" for k, n in sk.get("reasons", {}).items())
+            per_seed = " per seed" if len(splits[split].get("seeds", {})) > 1 else ""
+            out.append(f"{split}: {sk['picked'] - sk['count']} of {sk['picked']} episodes{per_seed} ({sk['count']} "
+                       f"skipped before the run: {reasons}; `ovon dataset validate` lists them)")
     return out
 
 

@@ -6,7 +6,7 @@ import re
 from pathlib import Path
 
 from ovon.atomic import atomic_write_text
-from ovon.reports.compare import load_meta, load_run, markdown_report
+from ovon.reports.compare import load_meta, load_run, load_skipped, markdown_report
 from ovon.reports.labels import run_label
 from ovon.reports.plots import plot_failures, plot_sr_per_category, plot_sr_vs_distance
 
@@ -29,7 +29,7 @@ def build_report(run_dirs: list[str | Path], out_dir: str | Path) -> Path:
     runs = [(label, recs) for label, (_, recs) in zip(labels, loaded)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    md = markdown_report(runs, metas)
+    md = markdown_report(runs, metas, [load_skipped(d) for d in run_dirs])
     figs = [plot_sr_vs_distance(runs, out / "sr_vs_distance.png")]
     names = [name for name, _ in loaded]
     for i, (label, recs) in enumerate(runs):

@@ -7,7 +7,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from ovon.dataset.io import VAL_SPLITS
-from ovon.evaluate.results import paper_table, read_records, summarize
+from ovon.evaluate.results import coverage_lines, paper_table, read_records, summarize
 from ovon.reports.labels import agent_label, noise_label
 from ovon.task.tracker import FAILURE_LABELS
 
@@ -26,6 +26,17 @@ def load_run(run_dir: str | Path) -> tuple[str, list[dict]]:
         )
     name = load_meta(run_dir).get("name") or run_dir.name
     return name, read_records(run_dir)
+
+
+def load_skipped(run_dir: str | Path) -> list[str]:
+    """The run's episodes skipped before it ran, one line per split (`coverage_lines` of its summary.json);
+    empty when none was skipped or the run has no summary yet."""
+    path = Path(run_dir) / "summary.json"
+    try:
+        splits = json.loads(path.read_text()).get("splits", {}) if path.exists() else {}
+    except (OSError, ValueError, AttributeError):
+        return []
+    return coverage_lines(splits) if isinstance(splits, dict) else []
 
 
 def failure_breakdown(records: list[dict]) -> dict[str, dict[str, float]]:
@@ -80,10 +91,15 @@ def noise_table(rows: list[tuple[str, str, dict]]) -> str:
     return "\n".join(lines)
 
 
-def markdown_report(runs: list[tuple[str, list[dict]]], metas: list[dict] | None = None) -> str:
-    """`runs` = (row name, records); `metas` (run.json per run) adds the noise table when any run has noise."""
+def markdown_report(runs: list[tuple[str, list[dict]]], metas: list[dict] | None = None,
+                    skipped: list[list[str]] | None = None) -> str:
+    """`runs` = (row name, records); `metas` (run.json per run) adds the noise table when any run has noise;
+    `skipped` (`load_skipped` per run) lists the episodes each run skipped before it ran."""
     rows = {name: summarize(recs) for name, recs in runs}
     parts = ["# ovon evaluation report", "", "## SR / SPL (%), mean ± std over seeds", "", paper_table(rows), ""]
+    notes = [f"- {name}, {line}" for (name, _), lines in zip(runs, skipped or []) for line in lines]
+    if notes:
+        parts += ["Episodes skipped before the run (the numbers above cover the others):", "", *notes, ""]
     if metas and any(noise_label(m) for m in metas):
         noisy = [(agent_label(m), noise_label(m), rows[name]) for (name, _), m in zip(runs, metas)]
         parts += ["## Noise (each agent with and without evaluation noise)", "", noise_table(noisy), ""]

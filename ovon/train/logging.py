@@ -2,13 +2,16 @@
 
 Why three: TensorBoard for looking, JSONL for scripts/reports (one line per logged update), the bar for
 the person at the terminal. Only rank 0 logs; other ranks get a no-op logger. On `--resume`, lines
-past the resumed update are dropped and TensorBoard purges events past it, so curves never fork.
+past the resumed update are dropped and TensorBoard purges events past it, so curves never fork; a line
+that is not a JSON object (the torn last line a kill -9 leaves) is dropped with a warning, as the torn
+lines of an evaluation's `episodes.jsonl` are.
 """
 
 from __future__ import annotations
 
 import json
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -36,9 +39,15 @@ class RunLogger:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.jsonl = self.out_dir / "metrics.jsonl"
         if self.jsonl.exists():  # resume: drop the part of the curve that will be redone
-            keep = [ln for ln in self.jsonl.read_text().splitlines() if ln.strip()
-                    and json.loads(ln).get("update", 0) <= start_update]
-            self.jsonl.write_text("".join(ln + "\n" for ln in keep))
+            from ovon.atomic import atomic_write_text
+
+            rows, torn = _parse(self.jsonl, warn=False)
+            if torn:
+                warnings.warn(f"{self.jsonl}: dropped {len(torn)} line(s) that are not complete metrics rows "
+                              f"(line {', '.join(map(str, torn[:5]))}: a write cut short by a kill); resuming at "
+                              f"update {start_update}", stacklevel=2)
+            keep = [ln for ln, r in rows if r.get("update", 0) <= start_update]
+            atomic_write_text(self.jsonl, "".join(ln + "\n" for ln in keep))
         self.writer = SummaryWriter(str(self.out_dir / "tb"), purge_step=start_step if start_step else None)
         if progress:
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -79,7 +88,27 @@ class RunLogger:
             self.writer = None
 
 
+def _parse(path: Path, warn: bool = True) -> tuple[list[tuple[str, dict[str, Any]]], list[int]]:
+    """The (line, row) pairs of a metrics.jsonl and the numbers of the lines that are not JSON objects."""
+    rows, torn = [], []
+    for i, ln in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+        if not ln.strip():
+            continue
+        try:
+            row = json.loads(ln)
+        except (ValueError, RecursionError):
+            row = None
+        if isinstance(row, dict) and isinstance(row.get("update"), int):
+            rows.append((ln, row))
+        else:
+            torn.append(i)
+    if torn and warn:
+        warnings.warn(f"{path}: skipped {len(torn)} line(s) that are not complete metrics rows (line "
+                      f"{', '.join(map(str, torn[:5]))})", stacklevel=3)
+    return rows, torn
+
+
 def read_metrics(out_dir: str | Path) -> list[dict[str, Any]]:
-    """The training curve written by `RunLogger`."""
+    """The training curve written by `RunLogger` (a torn line skipped with a warning)."""
     path = Path(out_dir) / "metrics.jsonl"
-    return [json.loads(ln) for ln in path.read_text().splitlines() if ln.strip()] if path.exists() else []
+    return [row for _, row in _parse(path)[0]] if path.exists() else []

@@ -124,6 +124,8 @@ def corrupt_datasets(w: World) -> dict[str, Path]:
     edit(copy("dup_ids"), lambda d: d["episodes"][1].__setitem__("episode_id", e0(d)["episode_id"]))
     edit(copy("nan_geodesic"), lambda d: e0(d)["info"].__setitem__("geodesic_distance", float("nan")))
     edit(copy("nan_start"), lambda d: e0(d).__setitem__("start_position", [float("nan"), 0, 0]))
+    edit(copy("huge_start"), lambda d: e0(d).__setitem__("start_position", [1e308, 0, 0]))
+    edit(copy("string_geodesic"), lambda d: e0(d)["info"].__setitem__("geodesic_distance", "far"))
     edit(copy("zero_rotation"), lambda d: e0(d).__setitem__("start_rotation", [0, 0, 0, 0]))
     edit(copy("non_unit_rotation"), lambda d: e0(d).__setitem__("start_rotation", [0, 0.5, 0, 0.5]))
     edit(copy("tilted_rotation"), lambda d: e0(d).__setitem__("start_rotation", [0.7071068, 0, 0, 0.7071068]))
@@ -233,16 +235,21 @@ def evaluate_cases(w: World, rnd: random.Random) -> list[Case]:
                  ["--data", str(w.work / "runs")]):
         err(what, what[0])
     bad = corrupt_datasets(w)
-    refuse = {"nan_start": "start_position", "escape_dotdot": "scenes root", "escape_absolute": "scenes root",
-              "not_json": "not valid JSON", "not_gzip": "gzip", "deep_json": "nested", "wrong_types": "start_position",
-              "missing_key": "scene_id", "empty_split": "no <scene>.json.gz", "no_content": "content/"}
+    refuse = {"nan_start": "start_position", "huge_start": "start_position", "escape_dotdot": "scenes root",
+              "escape_absolute": "scenes root", "not_json": "not valid JSON", "not_gzip": "gzip",
+              "deep_json": "nested", "wrong_types": "start_position", "missing_key": "scene_id",
+              "empty_split": "no <scene>.json.gz", "no_content": "content/"}
     for name, d in bad.items():
         argv, out = base()
         argv = [a if a != str(w.data) else str(d) for a in argv] + ["--splits", "val_seen"]
         if name in refuse:
             cases.append(Case("evaluate-data", argv, "error", (refuse[name],), out=out))
-        else:  # skipped with a counted warning: the other episodes run
+        else:  # skipped with a counted warning: the other episodes run; --strict refuses naming the file
             cases.append(Case("evaluate-data", argv, "ok", check="skipped", out=out))
+            if name in ("string_geodesic", "off_map_start", "dup_ids"):
+                argv, out = base()
+                argv = [a if a != str(w.data) else str(d) for a in argv] + ["--splits", "val_seen", "--strict"]
+                cases.append(Case("evaluate-data", argv, "error", (".json.gz", "episode", "--strict"), out=out))
     # right results
     ok([])
     ok(["--splits", "val_seen,val_unseen", "--seeds", "0,1", "--episodes", "3"])
@@ -369,7 +376,8 @@ def dataset_cases(w: World) -> list[Case]:
     # validate / stats / splits
     for name, d in corrupt_datasets_cached(w).items():
         argv = ["dataset", "validate", str(d), "--scenes", str(w.scenes), "--split", "val_seen"]
-        refuse = name in ("not_json", "not_gzip", "deep_json", "wrong_types", "missing_key", "nan_start")
+        refuse = name in ("not_json", "not_gzip", "deep_json", "wrong_types", "missing_key", "nan_start",
+                          "huge_start")
         cases.append(Case("validate", argv, "error" if refuse else "fail1", () if not refuse else ("json.gz",)))
     cases.append(Case("validate", ["dataset", "validate", str(w.data), "--scenes", str(w.scenes)], "ok"))
     for extra, needle in [([str(w.work / "missing"), "--scenes", str(w.scenes)], "DATA"),
@@ -380,6 +388,20 @@ def dataset_cases(w: World) -> list[Case]:
         cases.append(Case("validate", ["dataset", "validate", *extra], "error", (needle,)))
     cases.append(Case("stats", ["dataset", "stats", str(w.work / "missing")], "error", ("DATA",)))
     cases.append(Case("stats", ["dataset", "stats", str(w.data), "--json"], "ok"))
+    bad = corrupt_datasets_cached(w)
+    cases.append(Case("stats", ["dataset", "stats", str(bad["string_geodesic"])], "error",
+                      (".json.gz", "episodes[0]", "geodesic_distance")))
+    for i, text in enumerate(['{"train": [1, ', '{"train": 5}', "[1]"]):
+        d = w.work / "bad_cats" / f"c{i}"
+        if not d.exists():
+            shutil.copytree(w.data, d, ignore=shutil.ignore_patterns(".cache"))
+        (d / "categories.json").write_text(text)
+        cases.append(Case("stats", ["dataset", "stats", str(d)], "error", (str(d / "categories.json"),)))
+    # scenes that yield no episode, an empty semantic.txt
+    for kind, needle in (("nofloor", "no navigable floor"), ("empty_txt", "semantic.txt")):
+        argv, out = gen("--split", "val_seen", "--preset", "fast", "--set", "viewpoints.render_size=48")
+        argv[argv.index("--scenes") + 1] = str(broken_world(w, kind))
+        cases.append(Case("generate", argv, "error", (needle,), out=out))
     for extra, needle in [(["--holdout", "1.5"], "--holdout"), (["--holdout", "0"], "--holdout"),
                           (["--threshold", "abc"], "--threshold"), (["--seed", "-1"], "--seed"),
                           (["--out", str(w.work)], "--out"), ([], "--vocabulary"),
@@ -391,6 +413,30 @@ def dataset_cases(w: World) -> list[Case]:
 
 
 _BAD: dict = {}
+
+
+def broken_world(w: World, kind: str) -> Path:
+    """One val scene of the tiny world, broken: `nofloor` (every face wound the other way, so its floors
+    face down) or `empty_txt` (an empty semantic.txt)."""
+    root = w.work / f"world_{kind}"
+    if root.exists():
+        return root
+    src = sorted((w.scenes / "val").iterdir())[0]
+    dst = root / "val" / src.name
+    shutil.copytree(src, dst)
+    if kind == "empty_txt":
+        next(dst.glob("*.semantic.txt")).write_text("")
+        return root
+    from ovon.scenes.hm3dsem import write_scene
+    from ovon.sim.world import load_scene_any
+
+    scene = load_scene_any(str(dst))
+    for mesh in (scene.mesh, scene.semantic_mesh):
+        if mesh is not None:
+            mesh.faces = mesh.faces[:, [0, 2, 1]].copy()
+    shutil.rmtree(dst)
+    write_scene(scene, dst)
+    return root
 
 
 def corrupt_datasets_cached(w: World) -> dict[str, Path]:
@@ -420,12 +466,21 @@ def other_cases(w: World) -> list[Case]:
         ck = broken / "checkpoint.pt"
         ck.write_bytes(ck.read_bytes()[: len(ck.read_bytes()) // 3])
     cases.append(Case("train", t + ["--resume", "--out", str(broken)], "error", ("checkpoint",)))
+    torn = w.work / "torn_metrics_run"  # a kill -9 mid-write leaves a torn last line in metrics.jsonl
+    if not torn.exists():
+        shutil.copytree(w.policy, torn)
+        with open(torn / "metrics.jsonl", "ab") as f:
+            f.write(b'{"update": 99, "st')
+    cases.append(Case("train", t + ["--resume", "--out", str(torn)], "ok", check="metrics", preserve=str(torn)))
     cases.append(Case("train", ["train", "--algo", "dagger", "--preset", "tiny", "--procedural", "x-y", "--out",
                                 str(w.work / "tr" / "proc")], "error", ("x-y",)))
     for extra, needle in [(["--width", "0"], "width"), (["--hfov", "180"], "hfov"), (["--pose", "1,2"], "--pose"),
-                          (["--pose", "a,b,c,d"], "--pose"), (["--backend", "x"], "--backend")]:
-        cases.append(Case("sim", ["sim", "view", "procedural:3", *extra, "--out", str(w.work / "v.png")], "error",
-                          (needle,)))
+                          (["--pose", "a,b,c,d"], "--pose"), (["--backend", "x"], "--backend"),
+                          (["--pitch", "1000"], "--pitch"), (["--pose", "1e308,0,0,0"], "--pose"),
+                          (["--seed", "-1"], "--seed"), (["--out", str(w.work)], "--out"),
+                          (["--out", str(w.work / "v.jpg")], ".png")]:
+        out = [] if "--out" in extra else ["--out", str(w.work / "v.png")]
+        cases.append(Case("sim", ["sim", "view", "procedural:3", *extra, *out], "error", (needle,)))
     cases.append(Case("sim", ["sim", "view", str(w.work / "missing.glb"), "--out", str(w.work / "v.png")], "error",
                       ("missing.glb",)))
     cases.append(Case("sim", ["sim", "view", "procedural:x", "--out", str(w.work / "v.png")], "error",
@@ -518,6 +573,12 @@ def check_output(case: Case, before: dict[str, bytes]) -> str:
         changed = [k for k in set(before) | set(after) if before.get(k) != after.get(k)
                    and not k.endswith("generation_report.json")]
         return f"changed: {changed[:4]}" if changed else ""
+    if case.check == "metrics":
+        try:
+            rows = [json.loads(x) for x in (Path(case.preserve) / "metrics.jsonl").read_text().splitlines()]
+        except ValueError as e:
+            return f"metrics.jsonl still holds a torn line after the resume ({e})"
+        return "" if rows and all(isinstance(r, dict) for r in rows) else "metrics.jsonl lost its rows"
     if case.check in ("counts", "skipped"):
         out = Path(case.out or case.preserve)
         summary = json.loads((out / "summary.json").read_text())
@@ -544,9 +605,15 @@ def check_output(case: Case, before: dict[str, bytes]) -> str:
             want = min(ep, avail) * len(seeds)
             if case.check == "skipped" and name == "val_seen" and "off_map" in data:
                 want -= len(seeds)  # the start off the map is skipped before the run, the others run
-            got = summary["splits"].get(split, summary["splits"].get(name, {})).get("episodes")
+            entry = summary["splits"].get(split, summary["splits"].get(name, {}))
+            got = entry.get("episodes")
             if got != want:
                 return f"{split}: {got} episodes in the summary, expected {want}"
+            sk = entry.get("skipped") or {}
+            if sk.get("picked", -1) - sk.get("count", 0) != got // len(seeds):
+                return f"{split}: summary's skipped {sk} does not add up to {got} episodes over {len(seeds)} seed(s)"
+            if case.check == "skipped" and not sk.get("count"):
+                return f"{split}: the skipped episode is not counted in summary.json"
         return ""
     return ""
 
