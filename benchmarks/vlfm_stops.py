@@ -43,7 +43,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ovon.atomic import atomic_write_text  # noqa: E402
-from ovon.evaluate.results import SPLIT_ORDER, read_records  # noqa: E402
+from ovon.dataset.io import VAL_SPLITS as SPLIT_ORDER  # noqa: E402
+from ovon.evaluate.results import read_records  # noqa: E402
 from ovon.task.tracker import FAILURE_LABELS  # noqa: E402
 
 BINS = (0.25, 0.5, 1.0, 2.0)  # to_region histogram edges (m)

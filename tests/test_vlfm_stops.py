@@ -34,6 +34,7 @@ def _record(i: int, success: bool, failure: str | None, d: float, to_object: flo
         "failure": failure,
         "goal_in_view": in_view,
         "category": "chair",
+        "geodesic_distance": 3.0,
     }
     if to_object is not None:
         r["distance_to_object"] = to_object
