@@ -39,7 +39,9 @@ def register(sub) -> None:
     p.add_argument("--noise", default="", help="e.g. actuation,odometry, actuation:movebase*0.5 or odometry:drift "
                    "(default odometry: bounded per reading)")
     p.add_argument("--preset", choices=["auto", "cpu", "paper"], default="auto",
-                   help="cpu: 160x120 frames; paper: the 360x640 Stretch camera; auto: the camera a policy "
+                   help="cpu: 160x120 landscape frames (32 deg vertical field; --set sim.camera.width=72 --set "
+                        "sim.camera.height=128 keeps the paper's portrait view); paper: the 360x640 Stretch camera; "
+                        "auto: the camera a policy "
                         "checkpoint was trained with, else cpu")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="config override, e.g. sim.camera.width=224 or task.max_steps=300")

@@ -77,5 +77,7 @@ class SimConfig:
 
 
 def cpu_sim_config() -> SimConfig:
-    """Fast CPU preset: small landscape frames, same geometry."""
+    """Fast CPU preset: small landscape frames. Not the paper's view: the same 42 deg horizontal field but
+    32 deg vertical instead of the portrait camera's 68.6 deg, so the floor right in front of the agent and
+    low furniture fall out of frame; 72x128 (cpu-small's policies, the experiments) keeps the paper's 9:16."""
     return SimConfig(camera=CameraConfig(width=160, height=120))
