@@ -259,6 +259,37 @@ def test_evaluate_pointnav_on_held_out_houses(tmp_path: Path, tiny_policy: Path,
     assert "--procedural" in capsys.readouterr().err
 
 
+def test_pointnav_is_a_task_of_the_one_harness(tmp_path: Path) -> None:
+    """The Python API and the CLI write the same run folder; each task refuses the other's episode source
+    before any work."""
+    from ovon.cli.main import main
+    from ovon.config.base import ConfigError
+    from ovon.evaluate.harness import EvalConfig, evaluate
+    from ovon.evaluate.pointnav import checkpoint_task, pointnav_config
+
+    task = dataclasses.replace(checkpoint_task(None), max_steps=20)
+    cfg = pointnav_config(agent="random", procedural="80001", episodes=2, workers=1, task=task)
+    assert evaluate(cfg, tmp_path / "py", progress=False)["splits"]["val"]["episodes"] == 2
+    cli = ["evaluate", "--task", "pointnav", "--procedural", "80001", "--episodes", "2", "--agent", "random",
+           "--workers", "1", "--set", "task.max_steps=20", "--no-progress", "--out", str(tmp_path / "cli")]  # fmt: skip
+    assert main(cli) == 0
+    for name in ("episodes.jsonl", "summary.json", "run.json", "run_identity.json"):
+        assert (tmp_path / "py" / name).read_bytes() == (tmp_path / "cli" / name).read_bytes(), name
+    bad = {
+        "needs --procedural": pointnav_config(agent="random", procedural=""),
+        "drop --data": pointnav_config(agent="random", data=str(tmp_path)),
+        "one split": pointnav_config(agent="random", splits=("val_seen",)),
+        "house seeds are for --task pointnav": EvalConfig(
+            agent="random", data=str(tmp_path), scenes=str(tmp_path), procedural="1"
+        ),
+        "--data = ''": EvalConfig(agent="random", data="", scenes=str(tmp_path)),
+    }
+    for i, (message, c) in enumerate(bad.items()):
+        with pytest.raises(ConfigError, match=message):
+            evaluate(c, tmp_path / f"bad{i}", progress=False)
+        assert not (tmp_path / f"bad{i}").exists()
+
+
 # ----- the learned navigator -----------------------------------------------------------------------------
 def test_learned_navigator_acts_inside_vlfm(tiny_policy: Path) -> None:
     """`navigator=learned` + `navigator.checkpoint` (as `--agent-arg` passes them) drive VLFM's exploration

@@ -12,7 +12,7 @@ import yaml
 from ovon.config.base import ExistingDir, existing_dir, from_args, in_range, non_empty, non_negative, validate
 from ovon.config.sim import SimConfig
 from ovon.dataset.io import VAL_SPLITS
-from ovon.evaluate.harness import EvalConfig, apply_overrides, parse_noise
+from ovon.evaluate.harness import EvalConfig, apply_overrides, check_source, parse_noise, with_camera
 
 
 def _csv(s: str) -> list[str]:
@@ -138,6 +138,7 @@ def eval_config(args) -> EvalConfig:
         "agent_kwargs": _agent_kwargs(args.agent_arg, args.checkpoint),
         "data": args.data,
         "scenes": args.scenes,
+        "procedural": args.procedural or "",
         "splits": args.splits,
         "seeds": args.seeds,
         "episodes": args.episodes,
@@ -151,29 +152,27 @@ def eval_config(args) -> EvalConfig:
     elif args.preset == "auto" and args.agent in ("policy", "dagrl-od") and cfg.agent_kwargs.get("checkpoint"):
         camera = trained_camera(str(cfg.agent_kwargs["checkpoint"]))
         if camera:
-            cfg = dataclasses.replace(cfg, sim=dataclasses.replace(
-                cfg.sim, camera=dataclasses.replace(cfg.sim.camera, **camera)))
+            cfg = with_camera(cfg, camera)
             print(f"camera of the checkpoint: {camera.get('width')}x{camera.get('height')} (--preset cpu|paper "
                   "overrides)")
     cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, noise=parse_noise(args.noise)))
     return validate(apply_overrides(cfg, args.set))
 
 
-def pointnav_config(args):
-    """The command line as a `PointNavEvalConfig`: the checkpoint's task and camera unless --set says otherwise."""
-    from ovon.config.base import ConfigError, from_dict
-    from ovon.evaluate.pointnav import PointNavEvalConfig, checkpoint_task, with_camera
+def pointnav_config(args) -> EvalConfig:
+    """The command line as a PointNav `EvalConfig` (`ovon.evaluate.pointnav`): the checkpoint's task and
+    camera unless --set says otherwise."""
+    from ovon.config.base import from_dict
+    from ovon.evaluate.pointnav import checkpoint_task, pointnav_defaults
 
-    if args.data or args.scenes:
-        raise ConfigError("--task pointnav samples episodes in --procedural houses; fix: drop --data / --scenes")
-    if not args.procedural:
-        raise ConfigError("--task pointnav needs --procedural SEEDS (held-out houses, e.g. 80000-80003)")
     kwargs = _agent_kwargs(args.agent_arg, args.checkpoint)
-    data = {"agent": args.agent, "agent_kwargs": kwargs, "procedural": args.procedural, "seeds": args.seeds,
-            "workers": args.workers, "executor": args.executor, "name": args.name}
+    data = {"agent": args.agent, "agent_kwargs": kwargs, "data": args.data or "", "scenes": args.scenes or "",
+            "procedural": args.procedural or "", "seeds": args.seeds, "workers": args.workers,
+            "executor": args.executor, "name": args.name}
     if args.episodes is not None:
         data["episodes"] = args.episodes
-    cfg = from_dict(PointNavEvalConfig, data)
+    cfg = from_dict(EvalConfig, {**pointnav_defaults(), **data})
+    check_source(cfg)
     ckpt = kwargs.get("checkpoint")
     cfg = dataclasses.replace(cfg, task=checkpoint_task(str(ckpt) if ckpt else None))
     if args.preset == "paper":
@@ -191,12 +190,8 @@ def pointnav_config(args):
 def cmd_evaluate(args) -> int:
     from ovon.evaluate.harness import evaluate
 
-    if args.task == "pointnav":
-        from ovon.evaluate.pointnav import evaluate_pointnav
-
-        summary = evaluate_pointnav(pointnav_config(args), args.out, progress=not args.no_progress)
-    else:
-        summary = evaluate(eval_config(args), args.out, progress=not args.no_progress)
+    cfg = pointnav_config(args) if args.task == "pointnav" else eval_config(args)
+    summary = evaluate(cfg, args.out, progress=not args.no_progress)
     print((Path(args.out) / "table.md").read_text(), end="")
     n = sum(s["episodes"] for s in summary["splits"].values())
     skipped = sum((s.get("skipped") or {}).get("count", 0) for s in summary["splits"].values())

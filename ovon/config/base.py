@@ -161,6 +161,7 @@ class ExistingPath(Domain):
 
     kind: str = "file"  # file | dir
     optional: bool = False
+    empty: str = "for none"  # what an empty value means, for messages (e.g. "with --task pointnav")
 
     def accepts(self, value: Any) -> bool:
         if value in ("", None):
@@ -172,15 +173,15 @@ class ExistingPath(Domain):
         if noun == "strings":  # an element of a list
             return "existing files" if self.kind == "file" else "existing folders"
         what = "an existing file" if self.kind == "file" else "an existing folder"
-        return what + (" (or empty for none)" if self.optional else "")
+        return what + (f" (or empty {self.empty})" if self.optional else "")
 
 
 def ExistingFile(optional: bool = False) -> ExistingPath:  # noqa: N802
     return ExistingPath("file", optional)
 
 
-def ExistingDir(optional: bool = False) -> ExistingPath:  # noqa: N802
-    return ExistingPath("dir", optional)
+def ExistingDir(optional: bool = False, empty: str = "for none") -> ExistingPath:  # noqa: N802
+    return ExistingPath("dir", optional, empty)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -48,6 +48,7 @@ from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
+HOUSE_SEEDS = Pattern(r" *([0-9]+(-[0-9]+)? *(, *[0-9]+(-[0-9]+)? *)*)?", "house seeds like 80000-80003 or 0,5-7")
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
 MAY_CHANGE = ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "chunk", "name",
@@ -58,8 +59,10 @@ MAY_CHANGE = ("data", "scenes", "splits", "seeds", "episodes", "workers", "execu
 class EvalConfig:
     agent: str = non_empty("random", flag="--agent")
     agent_kwargs: dict = field(default_factory=dict)
-    data: str = constrained("data/datasets/ovon", ExistingDir(), flag="--data")
-    scenes: str = constrained("data/scene_datasets", ExistingDir(), flag="--scenes")
+    # objectnav: the episode dataset and scenes roots; pointnav: "" (episodes sampled in `procedural` houses)
+    data: str = constrained("data/datasets/ovon", ExistingDir(True, "with --task pointnav"), flag="--data")
+    scenes: str = constrained("data/scene_datasets", ExistingDir(True, "with --task pointnav"), flag="--scenes")
+    procedural: str = constrained("", HOUSE_SEEDS, flag="--procedural")  # pointnav only: house seeds, e.g. 80000-80003
     splits: tuple[str, ...] = non_empty(VAL_SPLITS, each=SPLIT_NAME, distinct=True, flag="--splits")
     seeds: tuple[int, ...] = non_empty((0,), each=NonNegative(), distinct=True, flag="--seeds")
     episodes: int | None = positive(None, flag="--episodes")  # per split; None = all
@@ -71,6 +74,13 @@ class EvalConfig:
     name: str | None = non_empty(None, flag="--name")  # row name in tables; default = agent (its own name if remote)
     remote: RemoteConfig = field(default_factory=RemoteConfig)  # --agent remote:HOST:PORT only
     strict: bool = False  # refuse a split holding an invalid episode instead of skipping it (counted)
+
+
+def with_camera(cfg: EvalConfig, camera: dict) -> EvalConfig:
+    """`cfg` with these camera fields changed (e.g. the camera a policy checkpoint was trained with)."""
+    return dataclasses.replace(
+        cfg, sim=dataclasses.replace(cfg.sim, camera=dataclasses.replace(cfg.sim.camera, **camera))
+    )
 
 
 def parse_noise(spec: str | None) -> NoiseConfig:
@@ -367,22 +377,70 @@ def skip_counts(selected: dict[str, SplitEpisodes]) -> dict[str, dict]:
                     "reasons": dict(sorted(sel.skipped.items()))} for split, sel in selected.items()}
 
 
+@dataclass
+class RunPlan:
+    """What an evaluation runs, whatever its task (`plan`): the episodes per split, the row name, the
+    config and inputs that identify the run folder, and the episodes skipped before the run (None: the
+    task skips none, and the summary says nothing about skipping)."""
+
+    specs: dict[str, list[EpisodeSpec]]
+    name: str
+    config: dict
+    inputs: dict
+    skipped: dict | None
+    label: str  # progress bar title
+
+
+def check_source(cfg: EvalConfig) -> None:
+    """Where the episodes come from fits the task: a dataset (`data`, `scenes`) for objectnav, procedural
+    houses (`procedural`) for pointnav."""
+    from ovon.config.base import ConfigError
+
+    if cfg.task.kind == "pointnav":
+        if cfg.data or cfg.scenes:
+            raise ConfigError("--task pointnav samples episodes in --procedural houses; fix: drop --data / --scenes")
+        if not cfg.procedural:
+            raise ConfigError("--task pointnav needs --procedural SEEDS (held-out houses, e.g. 80000-80003)")
+        return
+    if cfg.procedural:
+        raise ConfigError(f"--procedural = {cfg.procedural!r}: house seeds are for --task pointnav; fix: drop "
+                          "--procedural, or pass --task pointnav (Python: task.kind='pointnav')")
+    for flag, value in (("--data", cfg.data), ("--scenes", cfg.scenes)):
+        if not value:
+            raise ConfigError(f"{flag} = '': expected an existing folder; fix: pass {flag} (objectnav evaluates "
+                              "the episodes of a dataset; --task pointnav samples them in --procedural houses)")
+
+
+def plan(cfg: EvalConfig, workers: int | None = None) -> RunPlan:
+    """Everything that can refuse a run, before any episode (`check_source`, then the task's own checks:
+    `prepare_splits`, `ovon.evaluate.pointnav.pointnav_plan`)."""
+    check_source(cfg)
+    if cfg.task.kind == "pointnav":
+        from ovon.evaluate.pointnav import pointnav_plan
+
+        return pointnav_plan(cfg)
+    selected, name = prepare_splits(cfg, workers)
+    config = {k: v for k, v in to_dict(cfg).items() if k != "procedural"}  # identity as before pointnav joined
+    return RunPlan({split: sel.specs for split, sel in selected.items()}, name, config, run_inputs(cfg),
+                   skip_counts(selected), f"evaluate {name}")
+
+
 def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
+    """Run every (split, seed, episode) of `cfg` not yet in `run_dir` (objectnav: a dataset's splits;
+    `task.kind=pointnav`: point goals in procedural houses, `ovon.evaluate.pointnav`); returns the summary."""
     from ovon.agents.remote import is_remote
     from ovon.runfolder import RunFolder
 
-    selected, name = prepare_splits(cfg)
-    specs_by_split = {split: sel.specs for split, sel in selected.items()}
+    p = plan(cfg)
     run_dir = Path(run_dir)
-    with RunFolder.open(run_dir, "evaluate", to_dict(cfg), run_inputs(cfg), may_change=MAY_CHANGE,
-                        markers=("episodes.jsonl",)):
-        atomic_write_text(run_dir / "run.json", json.dumps({**to_dict(cfg), "name": name}, indent=2))
+    with RunFolder.open(run_dir, "evaluate", p.config, p.inputs, may_change=MAY_CHANGE, markers=("episodes.jsonl",)):
+        atomic_write_text(run_dir / "run.json", json.dumps({**p.config, "name": p.name}, indent=2))
         done = {record_key(r) for r in read_records(run_dir, repair=True)}
-        units = _units(cfg, specs_by_split, done)
+        units = _units(cfg, p.specs, done)
         total = sum(len(u["specs"]) for u in units)
         writer = RecordWriter(run_dir)
         try:
-            with progress_bar(f"evaluate {name}", total, progress and total > 0) as bar:
+            with progress_bar(p.label, total, progress and total > 0) as bar:
                 for recs in run_jobs(run_unit, units, cfg.workers, cfg.executor):
                     for r in recs:
                         writer.write(r)
@@ -392,8 +450,8 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
             if is_remote(cfg.agent):
                 release_agent()  # in-process runs: the connection closes with the run
         wanted = {(split, int(seed), s.scene, s.episode_id)
-                  for seed in cfg.seeds for split, specs in specs_by_split.items() for s in specs}
-        return finalize(run_dir, name, wanted, skip_counts(selected))
+                  for seed in cfg.seeds for split, specs in p.specs.items() for s in specs}
+        return finalize(run_dir, p.name, wanted, p.skipped)
 
 
 def finalize(run_dir: str | Path, name: str, wanted: set | None = None, skipped: dict | None = None) -> dict:

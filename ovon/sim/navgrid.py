@@ -9,7 +9,8 @@ navmesh's walkable polygons (already eroded by habitat: no erosion, no drivable 
 Method (one pass over the triangles for each stage, compiled with numba):
 
 1. Surface samples: every non-vertical triangle is rasterised at the cell *centres* of the xz grid
-   (exactly what a vertical ray per cell would hit, all hits at once). A sample is a floor candidate
+   (`ovon.sim.cellsample`, the rasteriser navmeshes use too: exactly what a vertical ray per cell would
+   hit, all hits at once). A sample is a floor candidate
    when its triangle faces up with a slope below `max_slope_deg` (winding decides "up", as in Recast).
 2. Clearance: every triangle (vertical walls included) is clipped to each cell square it overlaps; its
    y-range inside the cell blocks any candidate `h` of that cell with an overlap of
@@ -51,6 +52,7 @@ from scipy import ndimage
 from ovon.atomic import atomic_write_with
 from ovon.config.sim import AgentConfig, NavConfig
 from ovon.scenes.model import Scene
+from ovon.sim.cellsample import cell_samples, upward
 from ovon.sim.gridframe import grid_frame as _grid_frame
 from ovon.sim.gridframe import hint_bands
 from ovon.sim.los import los_between
@@ -58,55 +60,13 @@ from ovon.sim.los import los_between
 MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
 MIN_COVERED_FRACTION = 0.5  # no-hint mode: a floor has a ceiling over most of it; roofs do not
 ELEVATED_M = 0.3  # islands whose median surface is this far above the floor are furniture tops
-_EPS_BARY = 1e-7
+VERTICAL_TOL = 1e-6  # |normal_y| / |normal| below this: a vertical triangle, never a surface sample
 _uid_counter = itertools.count(1)
 
 
 # ----------------------------------------------------------------------------------------------
 # numba kernels
 # ----------------------------------------------------------------------------------------------
-
-
-@njit(cache=True)
-def _sample_pass(V, F, ox, oz, cs, rows, cols, cos_slope, fill, counts, ptr, ys, walk):
-    """Rasterise non-vertical triangles at cell centres: count (fill=False) or write samples."""
-    for t in range(F.shape[0]):
-        a = F[t, 0]
-        b = F[t, 1]
-        c = F[t, 2]
-        ax, ay, az = V[a, 0], V[a, 1], V[a, 2]
-        e1x, e1y, e1z = V[b, 0] - ax, V[b, 1] - ay, V[b, 2] - az
-        e2x, e2y, e2z = V[c, 0] - ax, V[c, 1] - ay, V[c, 2] - az
-        nx = e1y * e2z - e1z * e2y
-        ny = e1z * e2x - e1x * e2z
-        nz = e1x * e2y - e1y * e2x
-        nl = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if nl < 1e-12 or abs(ny) < 1e-6 * nl:
-            continue  # degenerate or vertical: a vertical ray never hits it
-        den = e1x * e2z - e1z * e2x  # = -ny, twice the signed xz area
-        is_walk = ny / nl >= cos_slope
-        xmin = min(ax, ax + e1x, ax + e2x)
-        xmax = max(ax, ax + e1x, ax + e2x)
-        zmin = min(az, az + e1z, az + e2z)
-        zmax = max(az, az + e1z, az + e2z)
-        c0 = max(0, int(math.ceil((xmin - ox) / cs - 0.5 - 1e-9)))
-        c1 = min(cols - 1, int(math.floor((xmax - ox) / cs - 0.5 + 1e-9)))
-        r0 = max(0, int(math.ceil((zmin - oz) / cs - 0.5 - 1e-9)))
-        r1 = min(rows - 1, int(math.floor((zmax - oz) / cs - 0.5 + 1e-9)))
-        for r in range(r0, r1 + 1):
-            pz = oz + (r + 0.5) * cs - az
-            for cc in range(c0, c1 + 1):
-                px = ox + (cc + 0.5) * cs - ax
-                w1 = (px * e2z - pz * e2x) / den
-                w2 = (e1x * pz - e1z * px) / den
-                if w1 < -_EPS_BARY or w2 < -_EPS_BARY or w1 + w2 > 1.0 + _EPS_BARY:
-                    continue
-                cell = r * cols + cc
-                if fill:
-                    k = ptr[cell] + counts[cell]
-                    ys[k] = ay + w1 * e1y + w2 * e2y
-                    walk[k] = is_walk
-                counts[cell] += 1
 
 
 @njit(cache=True)
@@ -446,18 +406,9 @@ class _Samples:
 
 
 def _rasterise(V, F, origin, cs, rows, cols, agent: AgentConfig, max_slope_deg: float) -> _Samples:
-    cos_slope = math.cos(math.radians(max_slope_deg))
-    ncell = rows * cols
-    counts = np.zeros(ncell, dtype=np.int64)
-    dummy_f = np.empty(0)
-    dummy_b = np.empty(0, dtype=np.bool_)
-    ptr = np.zeros(ncell + 1, dtype=np.int64)
-    _sample_pass(V, F, origin[0], origin[1], cs, rows, cols, cos_slope, False, counts, ptr, dummy_f, dummy_b)
-    np.cumsum(counts, out=ptr[1:])
-    ys = np.empty(int(ptr[-1]))
-    walk = np.empty(int(ptr[-1]), dtype=np.bool_)
-    counts[:] = 0
-    _sample_pass(V, F, origin[0], origin[1], cs, rows, cols, cos_slope, True, counts, ptr, ys, walk)
+    s = cell_samples(V, F, origin, cs, rows, cols, vertical_tol=VERTICAL_TOL)
+    ptr, ys = s.ptr, s.ys
+    walk = upward(V, F, math.cos(math.radians(max_slope_deg)))[s.tri]
     _sort_cells(ptr, ys, walk)
     blocked = np.zeros(len(ys), dtype=np.bool_)
     _block_pass(V, F, origin[0], origin[1], cs, rows, cols, ptr, ys, walk, agent.max_climb, agent.height, blocked)

@@ -17,7 +17,7 @@ from ovon.config.sim import AgentConfig
 from ovon.sim.navgrid import SceneNav
 from ovon.sim.navmesh.format import NavMesh
 from ovon.sim.navmesh.polys import compute_islands, navmesh_triangles
-from ovon.sim.navmesh.raster import _raster
+from ovon.sim.navmesh.raster import lowest_samples
 
 # habitat-lab's default agent (habitat.config.default_structured_configs): what its golden trajectory used
 HABITAT_AGENT = AgentConfig(radius=0.1, height=1.5, max_climb=0.2, forward_step=0.25, turn_angle_deg=10.0,
@@ -115,20 +115,15 @@ def topdown_agreement(
             f"golden top-down map has shape {golden.shape}, this navmesh gives {(rows, cols)} at "
             f"{meters_per_pixel} m per pixel: is it the map of another navmesh?"
         )
-    h = np.full((1, rows * cols), np.nan)
-    lab = np.full((1, rows * cols), -1, np.int32)
-    _raster(
-        np.ascontiguousarray(tris),
+    h, _ = lowest_samples(
+        tris,
         np.zeros(len(tris), np.int32),
-        float(bmin[0]) - mpp / 2,
-        float(bmin[2]) - mpp / 2,
+        np.array([float(bmin[0]) - mpp / 2, float(bmin[2]) - mpp / 2]),
         float(mpp),
         rows,
         cols,
         np.array([height - max_y_delta]),
         np.array([height + max_y_delta]),
-        h,
-        lab,
     )
     exact = ~np.isnan(h[0].reshape(rows, cols))
     rr, cc = np.nonzero(exact != golden)

@@ -3,14 +3,14 @@
 generation run on habitat's navigable area unchanged.
 
 Method: every walkable detail triangle (`polys.navmesh_triangles`) is sampled at the cell centres of
-one xz grid (a cell is navigable when its centre lies on a walkable triangle: the test habitat's
-`is_navigable` makes at a point). Samples go to floors by height (bands around `Scene.floor_heights`
-when a scene gives them, else around the navmesh's own big horizontal areas); per floor and cell the
-lowest sample wins. Two neighbouring cells (8-neighbourhood) that are on different habitat islands, or
-whose heights differ by more than the navmesh's walkable climb, are both dropped, so the grid never
-joins what the navmesh keeps apart. No radius erosion and no drivable opening: the navmesh is eroded
-already. `free` (un-eroded floor, used for visual line of sight) is the navigable area grown back by
-the radius the navmesh was eroded with.
+one xz grid (`ovon.sim.cellsample`, the rasteriser of mesh grids too; a cell is navigable when its
+centre lies on a walkable triangle: the test habitat's `is_navigable` makes at a point). Samples go to
+floors by height (bands around `Scene.floor_heights` when a scene gives them, else around the navmesh's
+own big horizontal areas); per floor and cell the lowest sample wins. Two neighbouring cells
+(8-neighbourhood) that are on different habitat islands, or whose heights differ by more than the
+navmesh's walkable climb, are both dropped, so the grid never joins what the navmesh keeps apart. No
+radius erosion and no drivable opening: the navmesh is eroded already. `free` (un-eroded floor, used for
+visual line of sight) is the navigable area grown back by the radius the navmesh was eroded with.
 """
 
 from __future__ import annotations
@@ -26,11 +26,12 @@ from scipy import ndimage
 
 from ovon.config.sim import NavConfig
 from ovon.scenes.hm3dsem.geometry import height_peaks
+from ovon.sim.cellsample import cell_samples
 from ovon.sim.gridframe import grid_frame, hint_bands
 from ovon.sim.navmesh.format import NavMesh, NavMeshError, parse_navmesh
 from ovon.sim.navmesh.polys import compute_islands, navmesh_triangles, triangle_areas
 
-_EPS_BARY = 1e-7
+_MIN_AREA2 = 1e-12  # twice the xz area below which a navmesh triangle covers no cell centre
 RADIUS_TOLERANCE = 0.01  # m: a navmesh eroded for another agent radius than sim.agent.radius is reported
 
 
@@ -55,39 +56,39 @@ MIN_FLOOR_AREA = 2.0  # m^2 of walkable surface at one height to count as a floo
 
 
 @njit(cache=True)
-def _raster(T, label, ox, oz, cs, rows, cols, lo, hi, height, lab):  # noqa: ANN001
-    """Lowest walkable sample per floor band and cell centre, and the island label of that sample."""
-    for t in range(T.shape[0]):
-        ax, ay, az = T[t, 0, 0], T[t, 0, 1], T[t, 0, 2]
-        e1x, e1y, e1z = T[t, 1, 0] - ax, T[t, 1, 1] - ay, T[t, 1, 2] - az
-        e2x, e2y, e2z = T[t, 2, 0] - ax, T[t, 2, 1] - ay, T[t, 2, 2] - az
-        den = e1x * e2z - e1z * e2x
-        if abs(den) < 1e-12:
-            continue  # vertical or degenerate: covers no cell centre
-        xmin = min(ax, ax + e1x, ax + e2x)
-        xmax = max(ax, ax + e1x, ax + e2x)
-        zmin = min(az, az + e1z, az + e2z)
-        zmax = max(az, az + e1z, az + e2z)
-        c0 = max(0, int(math.ceil((xmin - ox) / cs - 0.5 - 1e-9)))
-        c1 = min(cols - 1, int(math.floor((xmax - ox) / cs - 0.5 + 1e-9)))
-        r0 = max(0, int(math.ceil((zmin - oz) / cs - 0.5 - 1e-9)))
-        r1 = min(rows - 1, int(math.floor((zmax - oz) / cs - 0.5 + 1e-9)))
-        for r in range(r0, r1 + 1):
-            pz = oz + (r + 0.5) * cs - az
-            for c in range(c0, c1 + 1):
-                px = ox + (c + 0.5) * cs - ax
-                w1 = (px * e2z - pz * e2x) / den
-                w2 = (e1x * pz - e1z * px) / den
-                if w1 < -_EPS_BARY or w2 < -_EPS_BARY or w1 + w2 > 1.0 + _EPS_BARY:
-                    continue
-                y = ay + w1 * e1y + w2 * e2y
-                for b in range(lo.shape[0]):
-                    if lo[b] <= y < hi[b]:
-                        cell = r * cols + c
-                        if math.isnan(height[b, cell]) or y < height[b, cell]:
-                            height[b, cell] = y
-                            lab[b, cell] = label[t]
-                        break
+def _lowest(ptr, ys, tag, lo, hi, height, lab):  # noqa: ANN001
+    """Per floor band and cell, the lowest sample and its tag (the first in triangle order on a tie)."""
+    for cell in range(ptr.shape[0] - 1):
+        for k in range(ptr[cell], ptr[cell + 1]):
+            y = ys[k]
+            for b in range(lo.shape[0]):
+                if lo[b] <= y < hi[b]:
+                    if math.isnan(height[b, cell]) or y < height[b, cell]:
+                        height[b, cell] = y
+                        lab[b, cell] = tag[k]
+                    break
+
+
+def lowest_samples(
+    tris: np.ndarray,
+    label: np.ndarray,
+    origin: np.ndarray,
+    cs: float,
+    rows: int,
+    cols: int,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(bands, rows * cols) height of the lowest sample of the (T, 3, 3) triangles per floor band [lo, hi)
+    and cell centre (nan where none: `ovon.sim.cellsample`), and the `label` of its triangle (-1)."""
+    n = len(tris)
+    V = np.ascontiguousarray(tris, dtype=np.float64).reshape(-1, 3)
+    s = cell_samples(V, np.arange(3 * n).reshape(n, 3), origin, cs, rows, cols, area_tol=_MIN_AREA2)
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    height = np.full((len(lo), rows * cols), np.nan)
+    lab = np.full((len(lo), rows * cols), -1, np.int32)
+    _lowest(s.ptr, s.ys, np.asarray(label, dtype=np.int32)[s.tri], lo, hi, height, lab)
+    return height, lab
 
 
 def _cut(free: np.ndarray, h: np.ndarray, lab: np.ndarray, climb: float) -> np.ndarray:
@@ -137,9 +138,7 @@ def rasterise(mesh: NavMesh, nav: NavConfig, floor_heights: list[float] | None =
     bands = floor_bands(tris, floor_heights, float(nav.floor_separation))
     lo = np.array([b[1] for b in bands])
     hi = np.array([b[2] for b in bands])
-    height = np.full((len(bands), rows * cols), np.nan)
-    lab = np.full((len(bands), rows * cols), -1, np.int32)
-    _raster(np.ascontiguousarray(tris), label, float(origin[0]), float(origin[1]), cs, rows, cols, lo, hi, height, lab)
+    height, lab = lowest_samples(tris, label, origin, cs, rows, cols, lo, hi)
     climb = max((t.walkable_climb for t in mesh.tiles), default=0.0)
     grids = []
     for i, (nominal, _, _) in enumerate(bands):
