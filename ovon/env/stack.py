@@ -43,6 +43,9 @@ class EnvRecipe:
     sample_episodes: bool = True  # False: the caller picks each episode (reset(options={"episode": ...}))
     seed: int = 0
     scene_repeat: int = 4
+    # start-distance curriculum of the EpisodeSampler (0 = off): cap in m, episodes per env to reach all
+    curriculum_start_m: float = 0.0
+    curriculum_episodes: int = 0
 
     @property
     def needs_privileged(self) -> bool:
@@ -81,7 +84,8 @@ def build_env(recipe: EnvRecipe) -> gym.Env:
     if recipe.episodes and recipe.sample_episodes:
         from ovon.env.sampler import EpisodeSampler
 
-        env = EpisodeSampler(env, recipe.episodes, recipe.seed, recipe.scene_repeat)
+        env = EpisodeSampler(env, recipe.episodes, recipe.seed, recipe.scene_repeat, recipe.curriculum_start_m,
+                             recipe.curriculum_episodes)
     return env
 
 

@@ -118,6 +118,16 @@ class BCConfig:
 
 
 @dataclass(frozen=True)
+class CurriculumConfig:
+    """Start-distance curriculum (RL from scratch): each env's first episodes start within `start_m` of the
+    goal (geodesic, the dataset's `info.geodesic_distance`), the cap grows linearly with the episodes that
+    env has started and covers every episode after `episodes` of them. `start_m` 0 = off (all episodes)."""
+
+    start_m: float = non_negative(0.0)
+    episodes: int = positive(300)
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     algo: Algo = "dagger"
     policy: PolicyConfig = field(default_factory=PolicyConfig)
@@ -135,6 +145,7 @@ class TrainConfig:
     env_workers: int = in_range(-1, -1, None)  # processes for the envs: -1 = one per env, 0 = in this process
     rollout_steps: int = positive(100)
     scene_repeat: int = positive(16)  # episodes sampled from a scene before an env may switch scene (world reloads)
+    curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
     # Budget: environment steps over all ranks; `max_updates` > 0 caps the number of updates instead.
     total_steps: int = positive(150_000_000)
     max_updates: int = non_negative(0)

@@ -83,7 +83,8 @@ class TrainRun:
         recipe = EnvRecipe(sim=cfg.sim, task=task, encoder=cfg.encoder,
                            text_table={k: torch.as_tensor(v).float().numpy() for k, v in table.items()},
                            expert=cfg.expert if label else None, expert_cfg=expert_config(cfg) if label else None,
-                           expert_viewpoint_radius=cfg.expert_viewpoint_radius_m, scene_repeat=cfg.scene_repeat)
+                           expert_viewpoint_radius=cfg.expert_viewpoint_radius_m, scene_repeat=cfg.scene_repeat,
+                           curriculum_start_m=cfg.curriculum.start_m, curriculum_episodes=cfg.curriculum.episodes)
         self.envs = TrainEnvs(recipe, mine, cfg.num_envs, cfg.env_workers, cfg.seed * 1000 + self.info.rank)
         return self.envs, self.envs.reset()
 
