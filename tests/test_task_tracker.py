@@ -207,3 +207,21 @@ def test_where_the_episode_ended():
     m = t.metrics()
     assert m.goal_in_view and m.distance_to_object == pytest.approx(2.0)
     assert m.failure == "stop_too_far"
+
+
+def test_goal_view_reward_pays_only_new_view_of_the_goal():
+    """dense_goal_view: the increase of the largest goal fraction seen so far (the first frame is free)."""
+    cfg = TaskConfig(reward=RewardConfig(dense_slack=0.0, dense_goal_view=2.0))
+    t = EpisodeTracker(lambda p: 5.0, frozenset({GOAL}), cfg)
+    t.reset(np.zeros(3), semantic=frame({GOAL: 0.02}))
+    expected = []
+    for frac in (0.0, 0.05, 0.03, 0.10, 0.10):
+        t.update(np.zeros(3), stop=False, collided=False, semantic=frame({GOAL: frac} if frac else None))
+        expected.append(t.reward())
+    assert expected == pytest.approx([0.0, 2.0 * 0.03, 0.0, 2.0 * 0.05, 0.0])
+    t.update(np.zeros(3), stop=False, collided=False)  # no frame: nothing paid
+    assert t.reward() == pytest.approx(0.0)
+    off = EpisodeTracker(lambda p: 5.0, frozenset({GOAL}), TaskConfig(reward=RewardConfig(dense_slack=0.0)))
+    off.reset(np.zeros(3), semantic=frame())
+    off.update(np.zeros(3), stop=False, collided=False, semantic=frame({GOAL: 0.5}))
+    assert off.reward() == 0.0 and off.goal_seen

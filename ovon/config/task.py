@@ -21,6 +21,11 @@ class RewardConfig:
     # scratch at CPU scale: progress alone leaves PPO turning in place; this makes the early policy explore.
     dense_coverage: float = 0.0
     coverage_range_m: float = positive(3.0)
+    # Per unit of the largest fraction of the frame that has shown goal instances so far in the episode (the
+    # reward is its increase, so looking at the goal again pays nothing; at most this much per episode;
+    # paper: 0). RL from scratch at CPU scale: the distance reward alone says nothing the agent can see until
+    # the goal is in view; this pays for bringing it into view and for approaching it until it fills the frame.
+    dense_goal_view: float = non_negative(0.0)
     sparse_success: float = 5.0
     sparse_slack: float = -0.001
     sparse_collision: float = -0.003

@@ -93,8 +93,11 @@ class EpisodeTracker:
         self.seen_ids: set[int] = set()
         self.in_view_ids: frozenset[int] = frozenset()  # seen (threshold) in the latest frame
         self._goal_id_array = np.array(sorted(self.goal_ids), dtype=np.int64)
+        self.goal_view_max = 0.0  # largest fraction of a frame showing goal instances so far
+        self.goal_view_gain = 0.0  # its increase at the last step (the dense_goal_view reward's unit)
         if semantic is not None:
             self._observe(semantic)
+        self.goal_view_gain = 0.0
 
     @property
     def done(self) -> bool:
@@ -107,10 +110,14 @@ class EpisodeTracker:
         ids = np.nonzero(counts >= need)[0]
         self.in_view_ids = frozenset(int(i) for i in ids)
         self.seen_ids.update(self.in_view_ids)
-        if not self.goal_seen and len(self._goal_id_array):
+        if len(self._goal_id_array):
             g = self._goal_id_array[self._goal_id_array < len(counts)]
-            if counts[g].sum() >= need:
+            goal_pixels = counts[g].sum()
+            if goal_pixels >= need:
                 self.goal_seen = True
+            frac = float(goal_pixels) / max(1, flat.size)
+            self.goal_view_gain = max(0.0, frac - self.goal_view_max)
+            self.goal_view_max = max(self.goal_view_max, frac)
 
     def update(
         self, position: np.ndarray, stop: bool, collided: bool, semantic: np.ndarray | None = None,
@@ -134,6 +141,7 @@ class EpisodeTracker:
         elif self.in_region:
             self.left_region = True
         self.in_region = inside
+        self.goal_view_gain = 0.0
         if semantic is not None:
             self._observe(semantic)
         if stop:
@@ -153,7 +161,8 @@ class EpisodeTracker:
             if not math.isfinite(delta):
                 delta = 0.0
             failed_stop = r.dense_failed_stop if self.called_stop else 0.0
-            return -delta + r.dense_slack + failed_stop + r.dense_coverage * self.new_area
+            return (-delta + r.dense_slack + failed_stop + r.dense_coverage * self.new_area
+                    + r.dense_goal_view * self.goal_view_gain)
         if r.kind == "sparse":
             collision = r.sparse_collision if self.last_collided else 0.0
             return (r.sparse_success if self.success else 0.0) + r.sparse_slack + collision
