@@ -13,9 +13,10 @@ geometric navigator.
 The caller decides when to stop: within `stop_distance_m + handover_m` of a goal point the geometric
 navigator takes the final approach (STOP within `stop_distance_m`, its settle rule); the policy's own STOP
 is masked, because the caller's radius, not the training radius, ends a modular episode, and a frontier is
-left by the caller. When the policy is stuck (under one forward step of motion over `stuck_steps` steps, with
-a bump) the geometric navigator drives the next `stuck_steps` steps. The policy's memory restarts when its point moves more than `retarget_m` or the target
-changes kind. Actions are sampled (the same seeded draws in every episode) unless `deterministic`.
+left by the caller. When the policy is stuck (under one forward step of motion over `stuck_steps` steps,
+with a bump) the geometric navigator drives the next `stuck_steps` steps. The policy's memory restarts
+when its point moves more than `retarget_m` or the target changes kind. Actions are sampled (the same
+seeded draws in every episode) unless `deterministic`.
 """
 
 from __future__ import annotations
@@ -117,7 +118,8 @@ class LearnedNavigator:
     def act(self, observation: dict, request: NavRequest) -> int | None:
         if request.kind == "goal" and request.rho < self.cfg.stop_distance_m + self.cfg.handover_m:
             if self.cfg.handover_m > 0:
-                self.target, self.rescue, self.recent = None, 0, []  # the policy starts afresh should the agent leave the final approach
+                # the policy starts afresh should the agent leave the final approach
+                self.target, self.rescue, self.recent = None, 0, []
                 return self.planner.act(observation, request)
             if request.rho < self.cfg.stop_distance_m:
                 return STOP
