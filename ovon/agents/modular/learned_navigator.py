@@ -94,8 +94,7 @@ class LearnedNavigator:
         n = self.cfg.stuck_steps
         if n == 0:
             return False
-        self.recent = [*self.recent[-(n - 1):], (request.pose.x, request.pose.z, bumped)] if n > 1 else \
-            [(request.pose.x, request.pose.z, bumped)]
+        self.recent = [*self.recent, (request.pose.x, request.pose.z, bumped)][-n:]
         if len(self.recent) < n or not any(b for _, _, b in self.recent):
             return False
         x0, z0, _ = self.recent[0]
