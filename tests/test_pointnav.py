@@ -333,25 +333,104 @@ def test_learned_navigator_refuses_bad_checkpoints(tmp_path: Path) -> None:
         VLFMAgent(navigator="learned", **{"navigator.checkpoint": str(tmp_path / "missing.pt")})
 
 
-def test_learned_navigator_stops_at_the_callers_radius(tiny_policy: Path) -> None:
-    from ovon.agents.modular.config import NavigatorConfig
+def _learned(policy: Path, **cfg):
+    """A learned navigator on an empty 12 m map (the tiny preset's camera)."""
+    from ovon.agents.modular.config import MapConfig, NavigatorConfig
     from ovon.agents.modular.learned_navigator import LearnedNavigator
-    from ovon.agents.modular.navigation import NavRequest
-    from ovon.agents.modular.sensors import Pose2D, Sensors
+    from ovon.agents.modular.maps import AgentMaps
+    from ovon.agents.modular.sensors import Sensors
     from ovon.config.sim import AgentConfig, CameraConfig
 
-    nav = LearnedNavigator(
-        NavigatorConfig(kind="learned", checkpoint=str(tiny_policy)),
-        None,
-        Sensors(CameraConfig(width=36, height=64), AgentConfig()),
-    )
+    sensors = Sensors(CameraConfig(width=36, height=64), AgentConfig())
+    maps = AgentMaps(MapConfig(size_m=24.0), sensors)
+    maps.reset()
+    return LearnedNavigator(NavigatorConfig(kind="learned", checkpoint=str(policy), **cfg), maps, sensors), maps
+
+
+def test_learned_navigator_stops_at_the_callers_radius(tiny_policy: Path) -> None:
+    from ovon.agents.modular.navigation import NavRequest
+    from ovon.agents.modular.sensors import Pose2D
+
+    nav, maps = _learned(tiny_policy)
     obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
-    assert nav.act(obs, NavRequest(Pose2D(0, 0, 0), (0.0, -0.5), "goal", None)) == 0  # within 0.9 m
-    far = NavRequest(Pose2D(0, 0, 0), (0.0, -3.0), "goal", None)
+    assert nav.act(obs, NavRequest(Pose2D(0, 0, 0), (0.0, -0.5), "goal", maps)) == 0  # within 0.9 m
+    far = NavRequest(Pose2D(0, 0, 0), (0.0, -3.0), "goal", maps)
     acts = [nav.act(obs, far) for _ in range(8)]
     assert set(acts) <= {1, 2, 3}  # never STOPs on its own further away (the caller's radius decides)
     nav.reset()
     assert [nav.act(obs, far) for _ in range(8)] == acts  # sampled, but seeded per episode
+
+
+def test_learned_navigator_heads_for_a_point_on_the_route_within_its_training_range(tiny_policy: Path) -> None:
+    """A frontier 10 m away behind a wall: the policy is given the point `subgoal_m` (default: the
+    checkpoint's point_max_distance_m) along the map's route, on free space around the wall; a near frontier
+    is given as it is; a goal point on an obstacle becomes the free cell where its route ends, within the
+    stop distance; no route, None."""
+    from ovon.agents.modular.navigation import NavRequest
+    from ovon.agents.modular.sensors import Pose2D
+    from ovon.train.config import train_preset
+
+    nav, maps = _learned(tiny_policy)
+    train_max = train_preset("tiny", task="pointnav").task.point_max_distance_m
+    assert nav.subgoal_m == train_max
+    pose = Pose2D(0.0, 0.0, 0.0)
+    xs = np.linspace(-2.0, 1.0, 80)
+    maps.add_obstacle_points(np.stack([xs, np.full_like(xs, -1.5)], 1))  # a wall across the straight line
+    far = NavRequest(pose, (0.0, -10.0), "frontier", maps)
+    sub = nav.subgoal(far)
+    assert sub is not None and maps.navigable[maps.cell(*sub)]
+    assert math.hypot(*sub) <= train_max + 0.1 and sub[0] > 1.0  # around the wall's open end, not through it
+    obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
+    assert nav.act(obs, far) in (1, 2, 3)
+    assert nav.target == sub
+    near = NavRequest(pose, (1.5, 0.5), "frontier", maps)
+    assert nav.subgoal(near) == (1.5, 0.5)
+    _learned_short, _ = _learned(tiny_policy, subgoal_m=2.0)
+    assert _learned_short.subgoal_m == 2.0
+    ring = np.array([[3.0 + r * math.cos(a), r * math.sin(a)] for r in (0.2, 0.3) for a in np.linspace(0, 6.3, 90)])
+    maps.add_obstacle_points(ring)  # the goal object
+    g = nav.subgoal(NavRequest(pose, (3.0, 0.0), "goal", maps))
+    assert g is not None and maps.navigable[maps.cell(*g)] and math.hypot(g[0] - 3.0, g[1]) < 0.9
+    box = [(6.0 + r * math.cos(a), 6.0 + r * math.sin(a)) for r in (0.6, 0.7) for a in np.linspace(0, 6.3, 200)]
+    maps.add_obstacle_points(np.array(box))  # an enclosed frontier: no route
+    assert nav.act(obs, NavRequest(pose, (6.0, 6.0), "frontier", maps)) is None
+
+
+def test_learned_navigator_hands_the_final_approach_and_getting_unstuck_to_the_geometric_one(
+    tiny_policy: Path,
+) -> None:
+    """Within stop_distance_m + handover_m of a goal point the geometric navigator acts (its final approach:
+    one step lands inside the radius); after `stuck_steps` policy steps without a forward step of motion and
+    with a bump it drives the next `stuck_steps` steps; with both off the policy acts throughout."""
+    from ovon.agents.modular.navigation import GeometricNavigator, NavRequest
+    from ovon.agents.modular.sensors import Pose2D
+    from ovon.config.base import ConfigError
+
+    nav, maps = _learned(tiny_policy)
+    geo = GeometricNavigator(nav.cfg, maps, maps.sensors)
+    obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
+    pose = Pose2D(0.0, 0.0, math.radians(90.0))  # facing -x; the goal point 1.05 m ahead along -z
+    req = NavRequest(pose, (0.0, -1.05), "goal", maps)
+    assert nav.act(obs, req) == geo.act(obs, req) == 3  # TURN_RIGHT toward it, then one step lands inside
+    # stuck: the same pose with a bump, stuck_steps times
+    frontier = NavRequest(Pose2D(0.0, 0.0, 0.0), (0.0, -4.0), "frontier", maps)
+    bumped = {**obs, "collided": 1}
+    for _ in range(nav.cfg.stuck_steps - 1):
+        nav.act(bumped, frontier)
+        assert nav.rescue == 0
+    nav.act(bumped, frontier)
+    assert nav.rescue == nav.cfg.stuck_steps - 1  # the geometric navigator took this step and drives 7 more
+    assert nav.target is None  # the policy restarts afterwards
+    nav.reset()
+    assert nav.rescue == 0
+    off, _ = _learned(tiny_policy, stuck_steps=0, handover_m=0.0)
+    for _ in range(20):
+        off.act(bumped, frontier)
+        assert off.rescue == 0 and off.target is not None
+    with pytest.raises((ConfigError, ValueError), match="stuck_steps"):
+        _learned(tiny_policy, stuck_steps=-1)
+    with pytest.raises((ConfigError, ValueError), match="handover_m"):
+        _learned(tiny_policy, handover_m=-0.5)
 
 
 def test_curve_png_from_metrics(tmp_path: Path, tiny_policy: Path, capsys) -> None:

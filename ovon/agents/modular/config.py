@@ -85,6 +85,21 @@ class NavigatorConfig:
     # learned: argmax actions instead of sampling (seeded at each episode's reset, so runs repeat); argmax
     # locks into turn-left / turn-right cycles more often (PointNav on held-out houses: 62% vs 70% SR)
     deterministic: bool = False
+    # learned: the policy is given the point this far along the route on the agent's map (A* as the geometric
+    # navigator plans it), not the target itself, when the route is longer; 0 = the checkpoint's training
+    # maximum (task.point_max_distance_m, geodesic). A goal vector alone says nothing about walls: a frontier
+    # 8-10 m away behind a wall, out of the 1-6 m the policy trained on, had it bump into that wall until the
+    # step limit
+    subgoal_m: float = 0.0
+    # learned: within stop_distance_m + this of a goal point the geometric navigator takes over (its final
+    # approach and settle rule). The policy learned to reach a floor point within 0.36 m with its own STOP;
+    # a goal point on an object, reached at 0.9 m with that STOP masked, is another task. 0 = never
+    handover_m: float = 0.25
+    # learned: when the policy moved less than one forward step over its last `stuck_steps` steps with a bump
+    # among them, the geometric navigator drives the next `stuck_steps` steps. The policy, pushed against a
+    # wall, alternates MOVE_FORWARD (bump) and a turn for hundreds of steps; 8 = the 6 turns that face any
+    # direction plus 2. 0 = never
+    stuck_steps: int = 8
 
     def __post_init__(self) -> None:
         _positive(self, "navigator", ("stop_distance_m", "turn_threshold_deg", "lookahead_m", "escape_radius_m",
@@ -98,8 +113,13 @@ class NavigatorConfig:
                 raise ValueError(f"navigator.checkpoint = {self.checkpoint!r} is not a policy file; fix: "
                                  "--agent-arg navigator.checkpoint=PATH to the policy.pt of `ovon train --task "
                                  "pointnav` (or its run folder)")
+        if self.subgoal_m < 0 or self.handover_m < 0:
+            raise ValueError(f"navigator.subgoal_m = {self.subgoal_m!r} and navigator.handover_m = "
+                             f"{self.handover_m!r} must be >= 0")
         if self.goal_ring_bins < 1:
             raise ValueError(f"navigator.goal_ring_bins = {self.goal_ring_bins!r} must be >= 1")
+        if self.stuck_steps < 0:
+            raise ValueError(f"navigator.stuck_steps = {self.stuck_steps!r} must be >= 0")
         if self.settle_steps < 1:
             raise ValueError(f"navigator.settle_steps = {self.settle_steps!r} must be >= 1")
 

@@ -2,12 +2,21 @@
 module of the modular agents (VLFM's PointNav policy; docs/spec.md#modular-baseline).
 
 Inputs are what the policy trained on: the depth frame and bump flag through the checkpoint's own encoder,
-and the goal vector (rho, cos theta, sin theta) of the request (`NavRequest.rho` / `.theta`, from odometry).
-The caller decides when to stop: STOP within `stop_distance_m` of a goal point (as the geometric
-navigator); the policy's own STOP is masked, because the caller's radius, not the training radius, ends
-a modular episode, and a frontier is left by the caller. The policy's memory restarts when the target
-moves more than `retarget_m` or changes kind. Actions are sampled (seeded per episode) unless
-`deterministic`.
+and the goal vector (rho, cos theta, sin theta) of a point from odometry. That point is the target itself
+when the route to it on the agent's map (the geometric navigator's A*) is at most `subgoal_m` long, else
+the point `subgoal_m` along that route: the policy trained on point goals 1-6 m away (geodesic) and a goal
+vector does not say where the walls are, so a frontier 8-10 m away behind a wall had it bump into the wall
+until the step limit. For a goal point the route ends at the nearest free cell within the stop distance
+(the goal point usually lies on the object). No route: None (the caller picks another target), as the
+geometric navigator.
+
+The caller decides when to stop: within `stop_distance_m + handover_m` of a goal point the geometric
+navigator takes the final approach (STOP within `stop_distance_m`, its settle rule); the policy's own STOP
+is masked, because the caller's radius, not the training radius, ends a modular episode, and a frontier is
+left by the caller. When the policy is stuck (under one forward step of motion over `stuck_steps` steps,
+with a bump) the geometric navigator drives the next `stuck_steps` steps. The policy's memory restarts
+when its point moves more than `retarget_m` or the target changes kind. Actions are sampled (the same
+seeded draws in every episode) unless `deterministic`.
 """
 
 from __future__ import annotations
@@ -20,7 +29,7 @@ import torch
 
 from ovon.agents.modular.config import NavigatorConfig
 from ovon.agents.modular.maps import AgentMaps
-from ovon.agents.modular.navigation import NavRequest
+from ovon.agents.modular.navigation import GeometricNavigator, NavRequest
 from ovon.agents.modular.sensors import Sensors
 from ovon.sim.agent import STOP
 from ovon.task.pointgoal import goal_vector
@@ -48,9 +57,12 @@ class LearnedNavigator:
     def __init__(self, cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors) -> None:
         from ovon.models.encoders import make_image_encoder
 
-        del maps  # the policy has its own memory; it needs no map
         self.cfg = cfg
+        self.maps = maps
+        self.planner = GeometricNavigator(cfg, maps, sensors)  # the route to far targets; the final approach
         self.policy, extra = load_pointnav_policy(cfg.checkpoint)
+        task = extra.get("task") or {}
+        self.subgoal_m = cfg.subgoal_m or float(task.get("point_max_distance_m") or 6.0)
         self.encoder = make_image_encoder(self.policy.encoder_cfg)
         cam = extra.get("camera") or {}
         hfov, w, h = cam.get("hfov_deg"), cam.get("width"), cam.get("height")
@@ -67,29 +79,71 @@ class LearnedNavigator:
         self.reset()
 
     def reset(self) -> None:
+        self.planner.reset()
         self.gen = torch.Generator().manual_seed(0)  # the same draws in every episode, whatever the worker
         self.state = self.policy.init_state(1, "cpu")
         self.prev = torch.full((1,), -1, dtype=torch.long)
         self.first = True
         self.target: tuple[float, float] | None = None
         self.kind = ""
+        self.recent: list[tuple[float, float, bool]] = []  # (x, z, bumped) of the policy's last steps
+        self.rescue = 0  # steps the geometric navigator still drives after the policy got stuck
+
+    def stuck(self, request: NavRequest, bumped: bool) -> bool:
+        """Less than one forward step of motion over the last `stuck_steps` policy steps, with a bump."""
+        n = self.cfg.stuck_steps
+        if n == 0:
+            return False
+        self.recent = [*self.recent, (request.pose.x, request.pose.z, bumped)][-n:]
+        if len(self.recent) < n or not any(b for _, _, b in self.recent):
+            return False
+        x0, z0, _ = self.recent[0]
+        return all(math.hypot(x - x0, z - z0) < self.planner.steering.step for x, z, _ in self.recent)
+
+    def subgoal(self, request: NavRequest) -> tuple[float, float] | None:
+        """The point the policy heads for: the target, or the point `subgoal_m` along the route to it."""
+        path = self.planner.route(request)
+        if path is None:
+            return None
+        pr, pc = path
+        steps = np.hypot(np.diff(pr), np.diff(pc)) * self.maps.cell_size
+        along = np.concatenate([[0.0], np.cumsum(steps)])
+        if along[-1] <= self.subgoal_m and request.kind == "frontier":
+            return request.target
+        k = int(np.searchsorted(along, self.subgoal_m, side="right")) - 1
+        return self.maps.cell_centre(int(pr[k]), int(pc[k]))
 
     @torch.no_grad()
     def act(self, observation: dict, request: NavRequest) -> int | None:
-        if request.kind == "goal" and request.rho < self.cfg.stop_distance_m:
-            return STOP
-        t = request.target
+        if request.kind == "goal" and request.rho < self.cfg.stop_distance_m + self.cfg.handover_m:
+            if self.cfg.handover_m > 0:
+                # the policy starts afresh should the agent leave the final approach
+                self.target, self.rescue, self.recent = None, 0, []
+                return self.planner.act(observation, request)
+            if request.rho < self.cfg.stop_distance_m:
+                return STOP
+        bumped = bool(observation.get("collided", 0))
+        if self.rescue == 0 and self.stuck(request, bumped):
+            self.rescue, self.recent = self.cfg.stuck_steps, []
+        if self.rescue > 0:
+            self.rescue -= 1
+            self.target = None
+            return self.planner.act(observation, request)
+        t = self.subgoal(request)
+        if t is None:
+            return None
         if self.target is None or request.kind != self.kind or math.dist(t, self.target) > self.cfg.retarget_m:
             self.state = self.policy.init_state(1, "cpu")
             self.prev = torch.full((1,), -1, dtype=torch.long)
             self.first = True
         self.target, self.kind = (float(t[0]), float(t[1])), request.kind
+        point = NavRequest(request.pose, self.target, request.kind, request.maps)
         batch = {
             "depth": np.asarray(observation["depth"], np.float32)[None],
-            "collided": np.array([int(observation.get("collided", 0))]),
+            "collided": np.array([int(bumped)]),
         }
         image = self.encoder.encode(batch).float()
-        goal = torch.from_numpy(goal_vector(request.rho, request.theta))[None]
+        goal = torch.from_numpy(goal_vector(point.rho, point.theta))[None]
         obs = self.policy.make_obs(image, goal)
         logits, _, self.state = self.policy.act_step(obs, self.prev, self.state, torch.tensor([self.first]))
         logits = logits[0].clone()

@@ -190,6 +190,16 @@ class GeometricNavigator:
             return None
         return trace_parents(self._parent, int(tr[best]), int(tc[best]), m.shape[1])
 
+    def route(self, request: NavRequest) -> tuple[np.ndarray, np.ndarray] | None:
+        """Shortest path (rows, cols) on the agent's map to the request's target: for a goal point to the
+        nearest free cell within the stop distance around it, for a frontier to its cell; None when none."""
+        if request.kind == "goal":
+            tr, tc = self._goal_targets(*request.target)
+        else:
+            r, c = self.maps.cell(*request.target)
+            tr, tc = np.array([r], dtype=np.int32), np.array([c], dtype=np.int32)
+        return self.plan(request.pose, tr, tc)
+
     # -- acting ---------------------------------------------------------------------------------
     def final_approach(self, pose: Pose2D, target: tuple[float, float]) -> int | None:
         """The first action of the smallest turn (then MOVE_FORWARD) whose forward step is free on the map and
@@ -233,12 +243,7 @@ class GeometricNavigator:
                 self.steering.record(pose.position, pose.yaw, action)
                 return action
         m = self.maps
-        if request.kind == "goal":
-            tr, tc = self._goal_targets(*request.target)
-        else:
-            r, c = m.cell(*request.target)
-            tr, tc = np.array([r], dtype=np.int32), np.array([c], dtype=np.int32)
-        path = self.plan(pose, tr, tc)
+        path = self.route(request)
         self.path = path
         if path is None:
             return None
