@@ -62,9 +62,9 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
     out = root / algo
     if algo == "dagger-overlap":
         cfg = dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=True))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _tree_cpu()
     train(dataclasses.replace(cfg, algo=algo.removesuffix("-overlap")), specs, out)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, _tree_cpu() - c0
     rows = read_metrics(out)
     steady = rows[1:] or rows
     steps = cfg.num_envs * cfg.rollout_steps
@@ -79,7 +79,19 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
         "learn_s": _stats(steady, "time/learn_s"),
         "first_update_s": rows[0]["time"] if rows else None,
         "wall_s": wall,
+        # CPU of this process and its env workers over the whole run (set-up included): on a shared
+        # machine the figure that does not depend on what else runs
+        "cpu_s": cpu,
+        "cpu_ms_per_step": 1000.0 * cpu / max(1, len(rows) * steps),
     }
+
+
+def _tree_cpu() -> float:
+    """User + system CPU seconds of this process and of its finished (joined) children."""
+    import resource
+
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def _learning(rows: list[dict]) -> list[dict]:
@@ -153,15 +165,19 @@ def compare(args) -> None:
         med = {n: float(np.median([r["algos"][key[n]]["env_steps_per_s"] for r in rs])) for n, rs in runs.items()}
         rollout = {n: float(np.median([r["algos"][key[n]]["rollout_steps_per_s"] for r in rs]))
                    for n, rs in runs.items()}
+        cpu = {n: float(np.median([r["algos"][key[n]].get("cpu_ms_per_step", np.nan) for r in rs]))
+               for n, rs in runs.items()}
         summary["algos"][algo] = {"env_steps_per_s": med, "rollout_steps_per_s": rollout,
                                   "ratio": med["current"] / med["baseline"],
-                                  "rollout_ratio": rollout["current"] / rollout["baseline"]}
+                                  "rollout_ratio": rollout["current"] / rollout["baseline"],
+                                  "cpu_ms_per_step": cpu, "cpu_ratio": cpu["baseline"] / cpu["current"]}
         entry = summary["algos"][algo]
         if algo == key["baseline"]:  # a variant (dagger-overlap) learns differently by design
             learned = [r["algos"][algo].get("learning") for rs in runs.values() for r in rs]
             entry["same_learning_as_baseline"] = all(x is not None and x == learned[0] for x in learned)
         print(f"{algo}: {med['baseline']:.0f} -> {med['current']:.0f} env steps/s including learning "
-              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}; same losses and episodes "
+              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}; CPU per step "
+              f"{cpu['baseline']:.2f} -> {cpu['current']:.2f} ms (x{entry['cpu_ratio']:.2f}); same losses and episodes "
               f"as the baseline: {entry.get('same_learning_as_baseline', 'n/a')}")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=1))
