@@ -125,9 +125,11 @@ def _child(args) -> None:
         out = measure_throughput(recipe, workers=0, steps=args.steps // 2)
     else:
         out = measure_throughput(recipe, workers=args.workers, envs=n, steps=args.steps)
+    from train_throughput import tree_commit
+
     import ovon
 
-    out["tree"] = str(Path(ovon.__file__).resolve().parents[1])
+    out["code"] = tree_commit(Path(ovon.__file__).resolve().parents[1])
     print("RESULT " + json.dumps(out), flush=True)
 
 
@@ -181,12 +183,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.baseline_rev:
         import tempfile
 
-        from train_throughput import baseline_tree
+        from train_throughput import baseline_tree, tree_commit
 
         tmp = Path(tempfile.mkdtemp(prefix="ovon-sim-bench-rev-"))
         base_dir, own = baseline_tree(Path(__file__).resolve().parents[1], args.baseline_rev, tmp)
     try:
-        return _run(args, configs, base_dir)
+        return _run(args, configs, base_dir, tree_commit(base_dir) if base_dir else None)
     finally:
         if own:
             import subprocess
@@ -199,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
             shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _run(args, configs: list[str], base_dir: Path | None) -> int:
+def _run(args, configs: list[str], base_dir: Path | None, base_code: str | None) -> int:
     here = Path(__file__).resolve().parents[1]
     goal = pick_goal(args.scene)
     rows = []
@@ -255,7 +257,7 @@ def _run(args, configs: list[str], base_dir: Path | None) -> int:
             vs = ", ".join(f"{c} x{r:.2f} (CPU per step x{cpu[c]:.2f})" for c, r in entry["ratio_vs_baseline"].items())
             print(f"{'':>16}  vs baseline: {vs}; same observations: {entry['same_as_baseline']}", flush=True)
     result = {"scene": args.scene, "goal": goal, "steps": args.steps, "repeats": args.repeats,
-              "baseline": str(args.baseline_rev) if args.baseline_rev else None,
+              "baseline": base_code,
               "target_steps_per_s": TARGET, "cpus": os.cpu_count(), "machine": platform.platform(),
               "time": time.strftime("%Y-%m-%dT%H:%M:%S"), "load_average_before": load_before,
               "load_average_after": os.getloadavg(), "rows": rows}

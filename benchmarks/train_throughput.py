@@ -156,7 +156,8 @@ def compare(args) -> None:
         if own:
             subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(base)], capture_output=True)
         shutil.rmtree(tmp, ignore_errors=True)
-    summary: dict = {"baseline_rev": args.baseline_rev, "repeats": args.repeats, "preset": args.preset,
+    rev = tree_commit(base) if Path(args.baseline_rev).is_dir() else args.baseline_rev
+    summary: dict = {"baseline_rev": rev, "repeats": args.repeats, "preset": args.preset,
                      "houses": args.houses, "updates": args.updates, "load_average": os.getloadavg(),
                      "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {},
                      "runs": runs}
@@ -182,6 +183,18 @@ def compare(args) -> None:
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=1))
     print(f"wrote {args.out}")
+
+
+def tree_commit(tree: Path) -> str:
+    """The commit a source tree is at, with "+dirty" when it has uncommitted changes (not its path: the
+    results are read on other machines)."""
+    import subprocess
+
+    def git(*a: str) -> str:
+        return subprocess.run(["git", "-C", str(tree), *a], capture_output=True, text=True).stdout.strip()
+
+    head = git("rev-parse", "--short=12", "HEAD") or "unknown"
+    return head + ("+dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 
 def baseline_tree(here: Path, rev: str, tmp: Path) -> tuple[Path, bool]:
@@ -230,7 +243,7 @@ def main() -> None:
                                             for t in texts}, cfg.encoder)
     import ovon
 
-    result = {"tree": str(Path(ovon.__file__).resolve().parents[1]),
+    result = {"code": tree_commit(Path(ovon.__file__).resolve().parents[1]),
               "preset": args.preset, "num_envs": cfg.num_envs, "env_workers": cfg.env_workers,
               "rollout_steps": cfg.rollout_steps, "camera": [cfg.sim.camera.width, cfg.sim.camera.height],
               "policy": dataclasses.asdict(cfg.policy), "encoder": cfg.encoder.image, "expert": args.expert,
