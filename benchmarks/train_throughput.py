@@ -186,15 +186,17 @@ def compare(args) -> None:
 
 
 def tree_commit(tree: Path) -> str:
-    """The commit a source tree is at, with "+dirty" when it has uncommitted changes outside
-    benchmarks/results (not its path: the results are read on other machines)."""
+    """The commit a source tree is at, with "+dirty" when its code (the package, the benchmarks, the
+    project file; not results or docs) has uncommitted changes. Not its path: results are read elsewhere."""
     import subprocess
 
     def git(*a: str) -> str:
         return subprocess.run(["git", "-C", str(tree), *a], capture_output=True, text=True).stdout.strip()
 
     head = git("rev-parse", "--short=12", "HEAD") or "unknown"
-    return head + ("+dirty" if git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!benchmarks/results") else "")
+    changed = git("status", "--porcelain", "--untracked-files=no", "--", "ovon", "benchmarks", "pyproject.toml",
+                  ":!benchmarks/results")
+    return head + ("+dirty" if changed else "")
 
 
 def baseline_tree(here: Path, rev: str, tmp: Path) -> tuple[Path, bool]:
