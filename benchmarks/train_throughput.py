@@ -4,10 +4,13 @@ Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,da
        [--workers 2] [--houses 0,1] [--text hash|real] [--out benchmarks/results/train_throughput.json]
        [--baseline-rev REV --repeats 2]
 
-With `--baseline-rev REV` (e.g. the tag `baseline-old-stack`, the code before the env-stack rewrite) the
-same benchmark runs alternately in this tree and in a temporary git worktree of REV, each in a fresh
-process, `--repeats` times; the JSON then holds both medians, their ratio and the CPU seconds (process
-tree) per env step of each. Compare ratios from one run: the machine is shared and noisy.
+With `--baseline-rev REV` (e.g. the tag `baseline-old-stack`, the code before the env-stack rewrite; or
+the directory of an existing worktree of it) this script measures, alternately, this tree and REV's
+(a temporary git worktree), each in a fresh process, `--repeats` times; the JSON then holds both
+medians, their ratio, the CPU seconds (process tree) of each run, and per algorithm whether every
+logged loss, gradient norm and episode metric of every run equals the baseline's
+(`same_learning_as_baseline`: a speed-up must not change what is learned). Compare ratios from one run:
+the machine is shared and noisy.
 
 `dagger-overlap` is DAgger with `dagger.overlap=true` (learning while the next rollout runs); against
 REV it is compared with REV's plain DAgger. Each online algorithm (DAgger with the configured expert,
@@ -36,7 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# The ovon tree to measure: this checkout, or (compare mode) the baseline's, run by this same script.
+TREE = Path(os.environ.get("OVON_BENCH_TREE") or Path(__file__).resolve().parents[1])
+sys.path.insert(0, str(TREE))
 
 from ovon.config.base import parse_seed_list  # noqa: E402
 from ovon.train.config import train_preset  # noqa: E402
@@ -57,14 +62,15 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
     out = root / algo
     if algo == "dagger-overlap":
         cfg = dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=True))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _tree_cpu()
     train(dataclasses.replace(cfg, algo=algo.removesuffix("-overlap")), specs, out)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, _tree_cpu() - c0
     rows = read_metrics(out)
     steady = rows[1:] or rows
     steps = cfg.num_envs * cfg.rollout_steps
     rollout = _stats(steady, "time/rollout_s")
     return {
+        "learning": _learning(rows),
         "updates": len(rows),
         "steps_per_update": steps,
         "env_steps_per_s": _stats(steady, "steps_per_s"),
@@ -73,7 +79,26 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
         "learn_s": _stats(steady, "time/learn_s"),
         "first_update_s": rows[0]["time"] if rows else None,
         "wall_s": wall,
+        # CPU of this process and its env workers over the whole run (set-up included): on a shared
+        # machine the figure that does not depend on what else runs
+        "cpu_s": cpu,
+        "cpu_ms_per_step": 1000.0 * cpu / max(1, len(rows) * steps),
     }
+
+
+def _tree_cpu() -> float:
+    """User + system CPU seconds of this process and of its finished (joined) children."""
+    import resource
+
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def _learning(rows: list[dict]) -> list[dict]:
+    """Every logged number of every update except timings and rates: equal in two trees iff both
+    trained the same (same losses, episodes, gradients), which a speed-up must not change."""
+    return [{k: v for k, v in r.items() if not k.startswith("time") and k not in ("steps_per_s", "time")}
+            for r in rows]
 
 
 def bench_bc(cfg, specs, root: Path, episodes: int) -> dict:
@@ -103,9 +128,7 @@ def compare(args) -> None:
 
     here = Path(__file__).resolve().parents[1]
     tmp = Path(tempfile.mkdtemp(prefix="ovon-bench-rev-"))
-    base = tmp / "baseline"
-    subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach", str(base), args.baseline_rev],
-                   check=True, capture_output=True)
+    base, own = baseline_tree(here, args.baseline_rev, tmp)
     algos = [a for a in args.algos.split(",") if a]
     base_algos = ",".join(dict.fromkeys(a.removesuffix("-overlap") for a in algos))  # REV has no overlap
     passthrough = ["--preset", args.preset, "--updates", str(args.updates),
@@ -119,9 +142,10 @@ def compare(args) -> None:
             for name, root in (("baseline", base), ("current", here)):
                 out = tmp / f"{name}{rep}.json"
                 before = resource.getrusage(resource.RUSAGE_CHILDREN)
-                subprocess.run([sys.executable, str(root / "benchmarks" / "train_throughput.py"), *passthrough,
+                subprocess.run([sys.executable, str(Path(__file__).resolve()), *passthrough,
                                 "--algos", base_algos if name == "baseline" else args.algos, "--out", str(out)],
-                               cwd=root, check=True, env={**os.environ, "PYTHONPATH": str(root)})
+                               cwd=root, check=True,
+                               env={**os.environ, "PYTHONPATH": str(root), "OVON_BENCH_TREE": str(root)})
                 after = resource.getrusage(resource.RUSAGE_CHILDREN)
                 r = json.loads(out.read_text())
                 r["cpu_s"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -129,9 +153,11 @@ def compare(args) -> None:
                 print(name, rep, {a: round(v.get("env_steps_per_s") or 0, 1) for a, v in r["algos"].items()},
                       flush=True)
     finally:
-        subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(base)], capture_output=True)
+        if own:
+            subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(base)], capture_output=True)
         shutil.rmtree(tmp, ignore_errors=True)
-    summary: dict = {"baseline_rev": args.baseline_rev, "repeats": args.repeats, "preset": args.preset,
+    rev = tree_commit(base) if Path(args.baseline_rev).is_dir() else args.baseline_rev
+    summary: dict = {"baseline_rev": rev, "repeats": args.repeats, "preset": args.preset,
                      "houses": args.houses, "updates": args.updates, "load_average": os.getloadavg(),
                      "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {},
                      "runs": runs}
@@ -140,15 +166,50 @@ def compare(args) -> None:
         med = {n: float(np.median([r["algos"][key[n]]["env_steps_per_s"] for r in rs])) for n, rs in runs.items()}
         rollout = {n: float(np.median([r["algos"][key[n]]["rollout_steps_per_s"] for r in rs]))
                    for n, rs in runs.items()}
+        cpu = {n: float(np.median([r["algos"][key[n]].get("cpu_ms_per_step", np.nan) for r in rs]))
+               for n, rs in runs.items()}
         summary["algos"][algo] = {"env_steps_per_s": med, "rollout_steps_per_s": rollout,
                                   "ratio": med["current"] / med["baseline"],
-                                  "rollout_ratio": rollout["current"] / rollout["baseline"]}
+                                  "rollout_ratio": rollout["current"] / rollout["baseline"],
+                                  "cpu_ms_per_step": cpu, "cpu_ratio": cpu["baseline"] / cpu["current"]}
         entry = summary["algos"][algo]
+        if algo == key["baseline"]:  # a variant (dagger-overlap) learns differently by design
+            learned = [r["algos"][algo].get("learning") for rs in runs.values() for r in rs]
+            entry["same_learning_as_baseline"] = all(x is not None and x == learned[0] for x in learned)
         print(f"{algo}: {med['baseline']:.0f} -> {med['current']:.0f} env steps/s including learning "
-              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}")
+              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}; CPU per step "
+              f"{cpu['baseline']:.2f} -> {cpu['current']:.2f} ms (x{entry['cpu_ratio']:.2f}); same losses and episodes "
+              f"as the baseline: {entry.get('same_learning_as_baseline', 'n/a')}")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=1))
     print(f"wrote {args.out}")
+
+
+def tree_commit(tree: Path) -> str:
+    """The commit a source tree is at, with "+dirty" when its code (the package, the benchmarks, the
+    project file; not results or docs) has uncommitted changes. Not its path: results are read elsewhere."""
+    import subprocess
+
+    def git(*a: str) -> str:
+        return subprocess.run(["git", "-C", str(tree), *a], capture_output=True, text=True).stdout.strip()
+
+    head = git("rev-parse", "--short=12", "HEAD") or "unknown"
+    changed = git("status", "--porcelain", "--untracked-files=no", "--", "ovon", "benchmarks", "pyproject.toml",
+                  ":!benchmarks/results")
+    return head + ("+dirty" if changed else "")
+
+
+def baseline_tree(here: Path, rev: str, tmp: Path) -> tuple[Path, bool]:
+    """The baseline source tree: `rev` itself when it is a directory (an existing worktree), else a
+    temporary git worktree of revision `rev` under `tmp`; returns (tree, whether it was created here)."""
+    import subprocess
+
+    if Path(rev).is_dir():
+        return Path(rev).resolve(), False
+    base = tmp / "baseline"
+    subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach", str(base), rev],
+                   check=True, capture_output=True)
+    return base, True
 
 
 def main() -> None:
@@ -163,7 +224,8 @@ def main() -> None:
     ap.add_argument("--text", default="hash", choices=["hash", "real"])
     ap.add_argument("--bc-episodes", type=int, default=8)
     ap.add_argument("--out", default="benchmarks/results/train_throughput.json")
-    ap.add_argument("--baseline-rev", help="git revision to compare against (alternating runs, fresh processes)")
+    ap.add_argument("--baseline-rev", help="git revision, or the directory of a worktree of it, to compare against "
+                    "(alternating runs, fresh processes)")
     ap.add_argument("--repeats", type=int, default=2)
     args = ap.parse_args()
     if args.baseline_rev:
@@ -181,7 +243,10 @@ def main() -> None:
         texts = needed_texts(specs)
         write_text_table(root / "text.pt", {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(384)
                                             for t in texts}, cfg.encoder)
-    result = {"preset": args.preset, "num_envs": cfg.num_envs, "env_workers": cfg.env_workers,
+    import ovon
+
+    result = {"code": tree_commit(Path(ovon.__file__).resolve().parents[1]),
+              "preset": args.preset, "num_envs": cfg.num_envs, "env_workers": cfg.env_workers,
               "rollout_steps": cfg.rollout_steps, "camera": [cfg.sim.camera.width, cfg.sim.camera.height],
               "policy": dataclasses.asdict(cfg.policy), "encoder": cfg.encoder.image, "expert": args.expert,
               "houses": args.houses, "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
@@ -193,7 +258,8 @@ def main() -> None:
                 result["algos"][algo] = bench_bc(cfg, specs, root, args.bc_episodes)
             else:
                 result["algos"][algo] = bench_online(algo, cfg, specs, root)
-            print(algo, json.dumps(result["algos"][algo]), f"({time.perf_counter() - t:.0f} s)", flush=True)
+            shown = {k: v for k, v in result["algos"][algo].items() if k != "learning"}
+            print(algo, json.dumps(shown), f"({time.perf_counter() - t:.0f} s)", flush=True)
     finally:
         shutil.rmtree(root, ignore_errors=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

@@ -210,6 +210,24 @@ def test_random_start_is_navigable_and_connected():
     env.close()
 
 
+def test_adhoc_viewpoints_are_built_once_and_equal_the_goal_band():
+    """An ad-hoc episode's viewpoints (navigable cells within 1 m of the goal objects) are cached per goal
+    set: every reset gets the same values, and the same shared objects (no rebuild per reset)."""
+    from ovon.task.goals import points_near_objects
+
+    env = make(privileged=True)
+    _, info = env.reset(seed=0)
+    first = truth(info)
+    _, info = env.reset(seed=1)
+    again = truth(info)
+    assert again.viewpoints[0] is first.viewpoints[0] and len(again.viewpoints) == len(first.viewpoints)
+    goals = [o for o in SCENE.objects if o.id in first.goal_ids]
+    expected = points_near_objects(first.grid, goals)
+    np.testing.assert_array_equal(np.stack([v.position for v in again.viewpoints]), expected)
+    assert all(v.yaw == 0.0 for v in again.viewpoints)
+    env.close()
+
+
 def test_reset_with_episode_start_and_viewpoints():
     env = make(privileged=True)
     vp = GoalViewpoint(np.array([1.0, 0.0, 1.5]), 0.0)

@@ -107,6 +107,30 @@ def test_goal_snapping_and_offgrid_queries(gap_nav):
     assert f.distance(q_off) == pytest.approx(f.distance(q_on) + (R + 0.03 - 0.05), abs=0.05)
 
 
+def test_snapped_goal_set_keeps_order_and_values(gap_nav):
+    """Many goals (the ~1000 viewpoints of an ad-hoc episode) snap in one pass: navigable ones unchanged,
+    the rest moved to their nearest navigable cell or dropped, in the original order."""
+    from ovon.sim.geodesic import MAX_SNAP, _snap_goals
+
+    g = gap_nav.floors[0]
+    rng = np.random.default_rng(0)
+    goals = np.stack([rng.uniform(-1.5, 11.5, 300), np.zeros(300), rng.uniform(-1.5, 7.5, 300)], axis=1)
+    expected = []
+    for p in goals:  # one goal at a time: snapping a set changes nothing else
+        if g.is_navigable(p):
+            expected.append(p)
+            continue
+        r, c = g.world_to_cell(p[None])
+        nr, nc = g.nearest_cell(int(r[0]), int(c[0]))
+        if nr >= 0:
+            q = g.cell_to_world(nr, nc)
+            if math.hypot(q[0] - p[0], q[2] - p[2]) <= MAX_SNAP:
+                expected.append(q)
+    out = _snap_goals(g, goals, MAX_SNAP)
+    assert 0 < len(out) < len(goals) and out.dtype == np.float64
+    np.testing.assert_array_equal(out, np.array(expected))
+
+
 def test_distance_is_cached_and_fast(gap_nav):
     g = gap_nav.floors[0]
     goals = np.array([[8.0, 0.0, 1.0], [1.0, 0.0, 5.0]])

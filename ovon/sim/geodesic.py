@@ -339,18 +339,17 @@ def _snap_goals(grid: NavGrid, goals: np.ndarray, max_snap: float) -> np.ndarray
     inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
     ok = np.zeros(len(goals), bool)
     ok[inside] = grid.navigable[rows[inside], cols[inside]]
-    out = []
-    for i, p in enumerate(goals):  # goals on navigable cells pass as they are; the rest snap (rare)
-        if ok[i]:
-            out.append(np.array(p, dtype=np.float64))
-            continue
+    # Goals on navigable cells pass as they are; the rest snap (rare), in place, so the order is kept.
+    out = np.array(goals, dtype=np.float64).reshape(-1, 3)
+    for i in np.flatnonzero(~ok):
         nr, nc = grid.nearest_cell(int(rows[i]), int(cols[i]))
         if nr < 0:
             continue
         q = grid.cell_to_world(nr, nc)
-        if math.hypot(q[0] - p[0], q[2] - p[2]) <= max_snap:
-            out.append(q)
-    return np.asarray(out, dtype=np.float64).reshape(-1, 3)
+        if math.hypot(q[0] - out[i, 0], q[2] - out[i, 2]) <= max_snap:
+            out[i] = q
+            ok[i] = True
+    return out[ok]
 
 
 @njit(cache=True)

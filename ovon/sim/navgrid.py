@@ -239,6 +239,7 @@ class NavGrid:
     narrow: np.ndarray | None = None  # free, clear of the radius, but in strips too narrow to drive
     uid: int = field(default_factory=lambda: next(_uid_counter))
     _nearest: np.ndarray | None = field(default=None, repr=False)
+    _start_cells: dict = field(default_factory=dict, repr=False)  # min_island_radius -> flat cell ids
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -329,13 +330,16 @@ class NavGrid:
 
     def random_point(self, rng: np.random.Generator, min_island_radius: float = 0.0) -> np.ndarray:
         """Uniform navigable point (jittered inside its cell) on a start island (`start_islands`)."""
-        ok = self.start_islands(min_island_radius)
-        if len(ok) == 0:
-            raise ValueError(f"floor {self.floor}: no island with radius >= {min_island_radius} m")
-        if len(ok) == len(self.island_radius):
-            cand = np.flatnonzero(self.navigable.ravel())
-        else:
-            cand = np.flatnonzero(np.isin(self.islands.ravel(), ok))
+        cand = self._start_cells.get(min_island_radius)
+        if cand is None:  # once per grid and radius: every training reset draws a start here
+            ok = self.start_islands(min_island_radius)
+            if len(ok) == 0:
+                raise ValueError(f"floor {self.floor}: no island with radius >= {min_island_radius} m")
+            if len(ok) == len(self.island_radius):
+                cand = np.flatnonzero(self.navigable.ravel())
+            else:
+                cand = np.flatnonzero(np.isin(self.islands.ravel(), ok))
+            self._start_cells[min_island_radius] = cand
         k = int(cand[rng.integers(len(cand))])
         r, c = divmod(k, self.navigable.shape[1])
         p = self.cell_to_world(r, c)

@@ -9,6 +9,7 @@ same episode without an env.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,9 @@ from ovon.sim.world import World
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
 from ovon.task.goals import distractors, goal_instances, points_near_objects
 from ovon.task.tracker import EpisodeTracker
+
+_ADHOC: OrderedDict = OrderedDict()  # (grid uids, goal object ids) -> (grid, points, viewpoints)
+_ADHOC_SIZE = 256  # goal sets per process, as the distance-field cache (ovon.sim.geodesic)
 
 
 @dataclass
@@ -57,18 +61,11 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
             g = world.nav.grid_for(anchors[int(i)])
             if all(g is not h for h in grids):
                 grids.append(g)
-    grid, points = grids[0], np.zeros((0, 3))
     if spec.viewpoints:
-        viewpoints = spec.viewpoints
+        grid, viewpoints = grids[0], spec.viewpoints
         points = np.stack([v.position for v in viewpoints])
     else:
-        for grid in grids:
-            points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
-            if len(points):
-                break
-        if len(points) == 0:
-            raise ValueError(f"no navigable point within 1 m of any {spec.goal_category!r} on its floor")
-        viewpoints = [GoalViewpoint(p, 0.0) for p in points]
+        grid, points, viewpoints = _adhoc_viewpoints(world, grids, objs, spec.goal_category)
     field = distance_field(grid, points)
     if start_pos is None:
         start_pos = _random_reachable_start(grid, field, rng, task.success_distance)
@@ -85,6 +82,31 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
                              object_distance_fn=lambda p: object_floor_distance(on_floor, p))
     state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
     return EpisodeSetup(state, grid, field, list(viewpoints), goal_ids, tracker)
+
+
+def _adhoc_viewpoints(world: World, grids: list, objs: list, goal: str) -> tuple:
+    """(grid, points, viewpoints) of an ad-hoc episode: the navigable points within 1 m of the goal objects
+    on the first of `grids` that has any. Cached per (grids, objects): a training env resets to the same
+    few goal sets thousands of times, and building the ~1000 viewpoints cost more than the episode's
+    first frame. The cached viewpoints are shared, read-only."""
+    key = (tuple(g.uid for g in grids), tuple(o.id for o in objs))
+    hit = _ADHOC.get(key)
+    if hit is not None:
+        _ADHOC.move_to_end(key)
+        return hit
+    grid, points = grids[0], np.zeros((0, 3))
+    for grid in grids:
+        points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
+        if len(points):
+            break
+    if len(points) == 0:
+        raise ValueError(f"no navigable point within 1 m of any {goal!r} on its floor")
+    points.flags.writeable = False
+    hit = (grid, points, tuple(GoalViewpoint(p, 0.0) for p in points))
+    _ADHOC[key] = hit
+    while len(_ADHOC) > _ADHOC_SIZE:
+        _ADHOC.popitem(last=False)
+    return hit
 
 
 def object_floor_distance(objects: list, position: np.ndarray) -> float:
