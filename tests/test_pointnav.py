@@ -264,8 +264,8 @@ def test_pointnav_is_a_task_of_the_one_harness(tmp_path: Path) -> None:
     before any work."""
     from ovon.cli.main import main
     from ovon.config.base import ConfigError
-    from ovon.evaluate.harness import EvalConfig, evaluate
-    from ovon.evaluate.pointnav import checkpoint_task, pointnav_config
+    from ovon.evaluate.harness import EvalConfig, evaluate, pointnav_config
+    from ovon.evaluate.pointnav import checkpoint_task
 
     task = dataclasses.replace(checkpoint_task(None), max_steps=20)
     cfg = pointnav_config(agent="random", procedural="80001", episodes=2, workers=1, task=task)

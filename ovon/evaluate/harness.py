@@ -35,6 +35,7 @@ from ovon.config.base import (
 from ovon.config.sim import CameraConfig, NoiseConfig, SimConfig
 from ovon.config.task import TaskConfig
 from ovon.dataset.io import SPLIT_NAME_PATTERN, VAL_SPLITS
+from ovon.evaluate.plan import RunPlan
 from ovon.evaluate.results import (
     RecordWriter,
     coverage_lines,
@@ -81,6 +82,14 @@ def with_camera(cfg: EvalConfig, camera: dict) -> EvalConfig:
     return dataclasses.replace(
         cfg, sim=dataclasses.replace(cfg.sim, camera=dataclasses.replace(cfg.sim.camera, **camera))
     )
+
+
+def pointnav_config(**fields) -> EvalConfig:
+    """An `EvalConfig` for PointNav: `ovon.evaluate.pointnav.pointnav_defaults()` updated with `fields`,
+    validated."""
+    from ovon.evaluate.pointnav import pointnav_defaults
+
+    return validate(EvalConfig(**{**pointnav_defaults(), **fields}))
 
 
 def parse_noise(spec: str | None) -> NoiseConfig:
@@ -376,19 +385,6 @@ def skip_counts(selected: dict[str, SplitEpisodes]) -> dict[str, dict]:
     return {split: {"picked": sel.picked, "count": sum(sel.skipped.values()),
                     "reasons": dict(sorted(sel.skipped.items()))} for split, sel in selected.items()}
 
-
-@dataclass
-class RunPlan:
-    """What an evaluation runs, whatever its task (`plan`): the episodes per split, the row name, the
-    config and inputs that identify the run folder, and the episodes skipped before the run (None: the
-    task skips none, and the summary says nothing about skipping)."""
-
-    specs: dict[str, list[EpisodeSpec]]
-    name: str
-    config: dict
-    inputs: dict
-    skipped: dict | None
-    label: str  # progress bar title
 
 
 def check_source(cfg: EvalConfig) -> None:

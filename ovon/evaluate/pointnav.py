@@ -19,7 +19,7 @@ from ovon.config.sim import CameraConfig, SimConfig
 from ovon.config.task import TaskConfig
 
 if TYPE_CHECKING:
-    from ovon.evaluate.harness import EvalConfig, RunPlan
+    from ovon.evaluate.plan import RunPlan
 
 SPLIT = "val"
 # The EvalConfig fields a PointNav run folder is identified by (run.json), in this order.
@@ -42,14 +42,6 @@ def pointnav_defaults() -> dict[str, Any]:
     }
 
 
-def pointnav_config(**fields: Any) -> EvalConfig:
-    """An `EvalConfig` for PointNav: `pointnav_defaults()` updated with `fields`, validated."""
-    from ovon.config.base import validate
-    from ovon.evaluate.harness import EvalConfig
-
-    return validate(EvalConfig(**{**pointnav_defaults(), **fields}))
-
-
 def checkpoint_task(checkpoint: str | None) -> TaskConfig:
     """The task a PointNav checkpoint was trained with, else the cpu-small PointNav preset's."""
     from ovon.config.base import from_dict
@@ -68,20 +60,21 @@ def checkpoint_task(checkpoint: str | None) -> TaskConfig:
     return pointnav_task()
 
 
-def pointnav_plan(cfg: EvalConfig) -> RunPlan:
-    """The harness's `RunPlan` of a PointNav evaluation: `cfg.episodes` point-goal episodes per house of
+def pointnav_plan(cfg: Any) -> RunPlan:
+    """The harness's `RunPlan` of a PointNav evaluation (`cfg`: the harness's `EvalConfig`, which this module
+    does not import: the harness imports it): `cfg.episodes` point-goal episodes per house of
     `cfg.procedural`, all in split "val"; the run folder is identified by the houses and the checkpoint's
     content."""
     from ovon.agents import check_agent
     from ovon.config.base import ConfigError, parse_seed_list
-    from ovon.evaluate.harness import RunPlan
+    from ovon.evaluate.plan import RunPlan
     from ovon.runfolder import file_sha256
     from ovon.task.pointgoal import pointnav_specs
 
     if tuple(cfg.splits) != (SPLIT,):
         raise ConfigError(
             f"splits = {list(cfg.splits)}: --task pointnav has one split, {SPLIT!r}; fix: leave "
-            f"splits out (Python: ovon.evaluate.pointnav.pointnav_config)"
+            f"splits out (Python: ovon.evaluate.harness.pointnav_config)"
         )
     if cfg.episodes is None:
         raise ConfigError("episodes = None: --task pointnav samples a given number per house; fix: pass --episodes N")
