@@ -45,6 +45,7 @@ class EpisodeSampler(gym.Wrapper):
                                  f"episode {missing[0]!r} has none (fix: episodes from `ovon dataset generate`, "
                                  f"or curriculum.start_m=0)")
             self.distance = np.array([float(s.info["geodesic_distance"]) for s in self.episodes])
+        self.top = float(self.distance.max())  # the cap reaches every episode here
         self.started = 0
         self.scene_repeat = max(1, int(scene_repeat))
         self.by_scene: dict[str, list[int]] = {}
@@ -63,8 +64,8 @@ class EpisodeSampler(gym.Wrapper):
         """The curriculum's cap on the start distance (m) for the next episode (inf without one)."""
         if not self.curriculum or self.started >= self.curriculum_episodes:
             return float("inf")
-        start, top = self.curriculum_start_m, float(self.distance.max())
-        return start + self.started / self.curriculum_episodes * max(0.0, top - start)
+        start = self.curriculum_start_m
+        return start + self.started / self.curriculum_episodes * max(0.0, self.top - start)
 
     def _eligible(self, scene: str) -> list[int]:
         """The scene's episodes under the cap; its closest one when none is."""

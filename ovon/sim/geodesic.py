@@ -14,21 +14,21 @@ Euclidean distances in a small window around each goal, so distances are not bia
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 import skfmm
 from numba import njit
 
+from ovon.lru import LRU
 from ovon.sim.los import los_between
 from ovon.sim.navgrid import NavGrid, SceneNav
 
 MAX_SNAP = 0.5  # m: goals farther than this from any navigable cell of the grid are ignored
 _SEED_RADIUS = 3  # cells: window around a goal where the level set is the exact Euclidean distance
 SEED_CIRCLE_CELLS = 2.5  # cells within this radius of a goal keep their exact distance; the front starts there
-_CACHE_SIZE = 256  # fields per process (a 400x400 field is 0.6 MB); training resets revisit goal sets
-_CACHE: OrderedDict[tuple, DistanceField] = OrderedDict()
+CACHE_SIZE = 256  # fields per process (a 400x400 field is 0.6 MB); training resets revisit goal sets
+_CACHE = LRU(CACHE_SIZE)  # (grid, goal set, snap, method) -> DistanceField
 
 
 # ----------------------------------------------------------------------------------------------
@@ -426,16 +426,12 @@ def distance_field(
     """Distance field to a goal set (K, 3), cached (LRU) per grid and goal set."""
     g = np.asarray(goals, dtype=np.float64).reshape(-1, 3)
     key = (grid.uid, np.round(g, 4).tobytes(), float(max_snap), method)
-    hit = _CACHE.get(key)
-    if hit is not None:
-        _CACHE.move_to_end(key)
-        return hit
-    used = _snap_goals(grid, g, max_snap)
-    field = DistanceField(grid, _compute(grid, used, method), used, max_snap)
-    _CACHE[key] = field
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return field
+
+    def make() -> DistanceField:
+        used = _snap_goals(grid, g, max_snap)
+        return DistanceField(grid, _compute(grid, used, method), used, max_snap)
+
+    return _CACHE.get(key, make)
 
 
 def geodesic_distance(nav: SceneNav, a, b, how: str = "field") -> float:

@@ -41,7 +41,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import math
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,6 +50,7 @@ from scipy import ndimage
 
 from ovon.atomic import atomic_write_with
 from ovon.config.sim import AgentConfig, NavConfig
+from ovon.lru import LRU
 from ovon.scenes.model import Scene
 from ovon.sim.cellsample import cell_samples, upward
 from ovon.sim.gridframe import grid_frame as _grid_frame
@@ -572,8 +572,7 @@ def compute_navigation(
     return grids
 
 
-_CACHE: OrderedDict[str, SceneNav] = OrderedDict()
-_CACHE_SIZE = 8
+_CACHE = LRU(8)  # scenes' navigation per process: mesh key (or navmesh key and agent) -> SceneNav
 
 
 def _cache_key(scene: Scene, agent: AgentConfig, nav: NavConfig) -> str:
@@ -642,21 +641,17 @@ def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavCon
         bounds = scene.mesh.bounds() if scene.mesh.num_faces else None
         return navmesh_navigation(scene.navmesh, agent, nav, scene.floor_heights, bounds, scene.source)
     key = _cache_key(scene, agent, nav)
-    hit = _CACHE.get(key)
-    if hit is not None:
-        _CACHE.move_to_end(key)
-        return hit
-    path = Path(cache_dir) / f"nav_{key}.npz" if cache_dir is not None else None
-    grids = _load(path, agent) if path is not None else None
-    if grids is None:
-        grids = compute_navigation(scene.mesh.vertices, scene.mesh.faces, scene.floor_heights, agent, nav)
-        if path is not None:
-            _save(path, grids)
-    result = SceneNav(floors=grids, agent=agent, nav=nav, key=key)
-    _CACHE[key] = result
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return result
+
+    def make() -> SceneNav:
+        path = Path(cache_dir) / f"nav_{key}.npz" if cache_dir is not None else None
+        grids = _load(path, agent) if path is not None else None
+        if grids is None:
+            grids = compute_navigation(scene.mesh.vertices, scene.mesh.faces, scene.floor_heights, agent, nav)
+            if path is not None:
+                _save(path, grids)
+        return SceneNav(floors=grids, agent=agent, nav=nav, key=key)
+
+    return _CACHE.get(key, make)
 
 
 def navmesh_navigation(path: str | Path, agent: AgentConfig | None = None, nav: NavConfig | None = None,
@@ -672,16 +667,14 @@ def navmesh_navigation(path: str | Path, agent: AgentConfig | None = None, nav: 
     nav = nav or NavConfig()
     data = navmesh_file_bytes(path)
     key = navmesh_key(data, nav, floor_heights)
-    hit = _CACHE.get(key)
-    if hit is None or hit.agent != agent:
+
+    def make() -> SceneNav:
         floors = floors_from_bytes(data, str(path), nav, floor_heights, agent.radius)
         grids = [_surface_grid(f.floor, f.height, f.origin, f.cell_size, f.navigable, f.free, f.heights)
                  for f in floors]
-        hit = SceneNav(floors=grids, agent=agent, nav=nav, key=key, source=str(path))
-        _CACHE[key] = hit
-        while len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-    _CACHE.move_to_end(key)
+        return SceneNav(floors=grids, agent=agent, nav=nav, key=key, source=str(path))
+
+    hit = _CACHE.get((key, agent), make)
     if bounds is not None:
         check_inside(hit.floors, bounds, str(path), mesh_name)
     return hit

@@ -9,22 +9,21 @@ same episode without an env.
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from ovon.config.task import TaskConfig
+from ovon.lru import LRU
 from ovon.scenes.model import footprint_distance
-from ovon.sim.geodesic import DistanceField, distance_field
+from ovon.sim.geodesic import CACHE_SIZE, DistanceField, distance_field
 from ovon.sim.types import AgentState
 from ovon.sim.world import World
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
 from ovon.task.goals import distractors, goal_instances, points_near_objects
 from ovon.task.tracker import EpisodeTracker
 
-_ADHOC: OrderedDict = OrderedDict()  # (grid uids, goal object ids) -> (grid, points, viewpoints)
-_ADHOC_SIZE = 256  # goal sets per process, as the distance-field cache (ovon.sim.geodesic)
+_ADHOC = LRU(CACHE_SIZE)  # (grid uids, goal object ids) -> (grid, points, viewpoints), as many as distance fields
 
 
 @dataclass
@@ -89,24 +88,18 @@ def _adhoc_viewpoints(world: World, grids: list, objs: list, goal: str) -> tuple
     on the first of `grids` that has any. Cached per (grids, objects): a training env resets to the same
     few goal sets thousands of times, and building the ~1000 viewpoints cost more than the episode's
     first frame. The cached viewpoints are shared, read-only."""
-    key = (tuple(g.uid for g in grids), tuple(o.id for o in objs))
-    hit = _ADHOC.get(key)
-    if hit is not None:
-        _ADHOC.move_to_end(key)
-        return hit
-    grid, points = grids[0], np.zeros((0, 3))
-    for grid in grids:
-        points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
-        if len(points):
-            break
-    if len(points) == 0:
-        raise ValueError(f"no navigable point within 1 m of any {goal!r} on its floor")
-    points.flags.writeable = False
-    hit = (grid, points, tuple(GoalViewpoint(p, 0.0) for p in points))
-    _ADHOC[key] = hit
-    while len(_ADHOC) > _ADHOC_SIZE:
-        _ADHOC.popitem(last=False)
-    return hit
+    def make() -> tuple:
+        grid, points = grids[0], np.zeros((0, 3))
+        for grid in grids:
+            points = points_near_objects(grid, [o for o in objs if world.nav.grid_for(o.aabb_min) is grid])
+            if len(points):
+                break
+        if len(points) == 0:
+            raise ValueError(f"no navigable point within 1 m of any {goal!r} on its floor")
+        points.flags.writeable = False
+        return grid, points, tuple(GoalViewpoint(p, 0.0) for p in points)
+
+    return _ADHOC.get((tuple(g.uid for g in grids), tuple(o.id for o in objs)), make)
 
 
 def object_floor_distance(objects: list, position: np.ndarray) -> float:

@@ -22,6 +22,7 @@ seeded draws in every episode) unless `deterministic`.
 from __future__ import annotations
 
 import math
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -86,7 +87,7 @@ class LearnedNavigator:
         self.first = True
         self.target: tuple[float, float] | None = None
         self.kind = ""
-        self.recent: list[tuple[float, float, bool]] = []  # (x, z, bumped) of the policy's last steps
+        self.recent: deque[tuple[float, float, bool]] = deque(maxlen=max(1, self.cfg.stuck_steps))  # (x, z, bumped)
         self.rescue = 0  # steps the geometric navigator still drives after the policy got stuck
 
     def stuck(self, request: NavRequest, bumped: bool) -> bool:
@@ -94,7 +95,7 @@ class LearnedNavigator:
         n = self.cfg.stuck_steps
         if n == 0:
             return False
-        self.recent = [*self.recent, (request.pose.x, request.pose.z, bumped)][-n:]
+        self.recent.append((request.pose.x, request.pose.z, bumped))
         if len(self.recent) < n or not any(b for _, _, b in self.recent):
             return False
         x0, z0, _ = self.recent[0]
@@ -118,13 +119,15 @@ class LearnedNavigator:
         if request.kind == "goal" and request.rho < self.cfg.stop_distance_m + self.cfg.handover_m:
             if self.cfg.handover_m > 0:
                 # the policy starts afresh should the agent leave the final approach
-                self.target, self.rescue, self.recent = None, 0, []
+                self.target, self.rescue = None, 0
+                self.recent.clear()
                 return self.planner.act(observation, request)
             if request.rho < self.cfg.stop_distance_m:
                 return STOP
         bumped = bool(observation.get("collided", 0))
         if self.rescue == 0 and self.stuck(request, bumped):
-            self.rescue, self.recent = self.cfg.stuck_steps, []
+            self.rescue = self.cfg.stuck_steps
+            self.recent.clear()
         if self.rescue > 0:
             self.rescue -= 1
             self.target = None
