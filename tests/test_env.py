@@ -119,6 +119,18 @@ def test_stop_ends_episode_with_metrics():
     env.close()
 
 
+def test_a_failed_stop_goes_on_when_training_says_so():
+    """task.failed_stop_ends=false: a STOP far from the goal costs and the episode continues."""
+    env = make(task=TaskConfig(failed_stop_ends=False, max_steps=3))
+    env.reset(options=given())
+    _, _, term, trunc, info = env.step(STOP)
+    assert not term and not trunc and "metrics" not in info and env.tracker.failed_stops == 1
+    env.step(TURN_LEFT)
+    _, _, term, trunc, info = env.step(STOP)
+    assert trunc and not term and not info["metrics"]["called_stop"]
+    env.close()
+
+
 def test_max_steps_truncates():
     env = make(task=TaskConfig(max_steps=3))
     env.reset(options=given())

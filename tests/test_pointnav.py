@@ -447,3 +447,20 @@ def test_curve_png_from_metrics(tmp_path: Path, tiny_policy: Path, capsys) -> No
         {"step": 20, "episode/success": 0.0, "episode/count": 3.0},
     ]
     assert learning_curve(rows, window=2) == ([10, 20], [1.0, 0.25])  # episode-weighted
+
+
+def test_learned_navigator_samples_with_the_episodes_seed(tiny_policy: Path) -> None:
+    """The same seed repeats an episode's draws; another seed (another evaluation seed) changes them."""
+    from ovon.agents.modular.navigation import NavRequest
+    from ovon.agents.modular.sensors import Pose2D
+
+    nav, maps = _learned(tiny_policy, stuck_steps=0, handover_m=0.0)
+    obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
+    request = NavRequest(Pose2D(0.0, 0.0, 0.0), (0.0, -4.0), "frontier", maps)
+
+    def draws(seed: int) -> list[int]:
+        nav.reset(seed)
+        return [nav.act(obs, request) for _ in range(40)]
+
+    assert draws(3) == draws(3)
+    assert draws(3) != draws(4)

@@ -225,3 +225,23 @@ def test_goal_view_reward_pays_only_new_view_of_the_goal():
     off.reset(np.zeros(3), semantic=frame())
     off.update(np.zeros(3), stop=False, collided=False, semantic=frame({GOAL: 0.5}))
     assert off.reward() == 0.0 and off.goal_seen
+
+
+def test_a_failed_stop_that_does_not_end_the_episode_costs_and_goes_on():
+    """task.failed_stop_ends=false (training only): a STOP outside the region costs dense_failed_stop and the
+    episode continues; a STOP inside still ends it as a success. The default ends it as a failure."""
+    reward = RewardConfig(dense_failed_stop=-0.25, dense_slack=0.0)
+    cfg = TaskConfig(failed_stop_ends=False, reward=reward)
+    t = EpisodeTracker(straight_line_field(1.0), frozenset({GOAL}), cfg)
+    t.reset(np.zeros(3))
+    t.update(np.array([0.25, 0.0, 0.0]), stop=True, collided=False)  # 0.75 m from the viewpoint
+    assert not t.done and not t.called_stop and t.failed_stops == 1
+    assert t.reward() == pytest.approx(0.25 - 0.25)  # progress minus the failed STOP
+    t.update(np.array([0.5, 0.0, 0.0]), stop=False, collided=False)
+    assert t.reward() == pytest.approx(0.25) and not t.stopped_outside
+    t.update(np.array([0.9, 0.0, 0.0]), stop=True, collided=False)  # inside the 0.25 m region
+    assert t.done and t.success and t.reward() == reward.dense_success
+    ends = EpisodeTracker(straight_line_field(1.0), frozenset({GOAL}), TaskConfig(reward=reward))
+    ends.reset(np.zeros(3))
+    ends.update(np.array([0.25, 0.0, 0.0]), stop=True, collided=False)
+    assert ends.done and not ends.success and ends.failed_stops == 0

@@ -45,6 +45,11 @@ class TaskConfig:
     # "goal seen" = at least this fraction of the frame shows a goal instance
     seen_fraction: float = in_range(0.01, 0.0, 1.0, lo_open=True)
     wrong_object_distance: float = non_negative(1.0)  # STOP within this of another category's (seen) instance
+    # A STOP outside the success region ends the episode as a failure (the task; evaluation always). false is
+    # for training only (RL from scratch at CPU scale): such a STOP costs `reward.dense_failed_stop` and the
+    # episode goes on, so trying STOP where the goal might be does not forfeit the rest of the episode and
+    # PPO can learn where STOP pays; a STOP inside the region still ends it as a success.
+    failed_stop_ends: bool = True
     reward: RewardConfig = RewardConfig()
     rules: ClassVar = (less("point_min_distance_m", "point_max_distance_m"),)
 

@@ -168,7 +168,7 @@ class ObjectNavEnv(gym.Env):
                              self._state.yaw)
         odo = self._odometry.update(self._state, self.np_random)
         reward = float(self._tracker.reward())
-        terminated = action == STOP
+        terminated = self._tracker.called_stop  # a STOP, unless task.failed_stop_ends is false and it missed
         truncated = not terminated and self._tracker.steps >= self.task_cfg.max_steps
         info = {"episode_id": self.spec_episode.episode_id}
         if terminated or truncated:

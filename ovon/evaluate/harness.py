@@ -15,7 +15,7 @@ import typing
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import ClassVar, Literal
 
 from ovon.agents.remote import RemoteConfig
 from ovon.atomic import atomic_write_text
@@ -29,6 +29,7 @@ from ovon.config.base import (
     non_empty,
     parse_overrides,
     positive,
+    rule,
     to_dict,
     validate,
 )
@@ -75,6 +76,9 @@ class EvalConfig:
     name: str | None = non_empty(None, flag="--name")  # row name in tables; default = agent (its own name if remote)
     remote: RemoteConfig = field(default_factory=RemoteConfig)  # --agent remote:HOST:PORT only
     strict: bool = False  # refuse a split holding an invalid episode instead of skipping it (counted)
+    rules: ClassVar = (rule(("task.failed_stop_ends",), bool,
+                            "task.failed_stop_ends true (false is a training-only setting: every STOP ends an "
+                            "evaluated episode)"),)
 
 
 def with_camera(cfg: EvalConfig, camera: dict) -> EvalConfig:

@@ -86,6 +86,8 @@ class EpisodeTracker:
         self.collisions = 0
         self.last_collided = False
         self.called_stop = False
+        self.stopped_outside = False  # the last step was a STOP outside the region that did not end the episode
+        self.failed_stops = 0  # such STOPs this episode (cfg.failed_stop_ends false)
         self.goal_seen = self.goal_known
         self.in_region = self.distance < self.cfg.success_distance
         self.entered_region = self.in_region
@@ -144,8 +146,13 @@ class EpisodeTracker:
         self.goal_view_gain = 0.0
         if semantic is not None:
             self._observe(semantic)
+        self.stopped_outside = False
         if stop:
-            self.called_stop = True
+            if inside or self.cfg.failed_stop_ends:
+                self.called_stop = True
+            else:
+                self.stopped_outside = True
+                self.failed_stops += 1
 
     @property
     def success(self) -> bool:
@@ -160,7 +167,7 @@ class EpisodeTracker:
             delta = self.distance - self.prev_distance
             if not math.isfinite(delta):
                 delta = 0.0
-            failed_stop = r.dense_failed_stop if self.called_stop else 0.0
+            failed_stop = r.dense_failed_stop if (self.called_stop or self.stopped_outside) else 0.0
             return (-delta + r.dense_slack + failed_stop + r.dense_coverage * self.new_area
                     + r.dense_goal_view * self.goal_view_gain)
         if r.kind == "sparse":

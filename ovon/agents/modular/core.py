@@ -28,7 +28,8 @@ def sensors_only(observation: dict) -> dict:
 
 
 def episode_seed(info: dict) -> int:
-    """The episode's seed (stable across processes), for the detector's and scorer's noise."""
+    """The episode's seed (stable across processes), for the detector's and scorer's noise and a sampling
+    navigator's draws."""
     s = info.get("seed")
     if s is not None:
         return int(s)
@@ -68,9 +69,10 @@ class ModularCore:
             self._build(sensors)
         assert self.maps is not None and self.navigator is not None and self.memory is not None
         self.maps.reset()
-        self.navigator.reset()
+        seed = episode_seed(episode_info)
+        self.navigator.reset(seed)
         self.memory.reset()
-        self.detector.reset(episode_seed(episode_info))
+        self.detector.reset(seed)
         self.pitch = 0.0
         self.last_action = None
         self.detected = False

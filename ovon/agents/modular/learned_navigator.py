@@ -15,8 +15,8 @@ navigator takes the final approach (STOP within `stop_distance_m`, its settle ru
 is masked, because the caller's radius, not the training radius, ends a modular episode, and a frontier is
 left by the caller. When the policy is stuck (under one forward step of motion over `stuck_steps` steps,
 with a bump) the geometric navigator drives the next `stuck_steps` steps. The policy's memory restarts
-when its point moves more than `retarget_m` or the target changes kind. Actions are sampled (the same
-seeded draws in every episode) unless `deterministic`.
+when its point moves more than `retarget_m` or the target changes kind. Actions are sampled (seeded by the
+episode's seed, so a run repeats and evaluation seeds vary the draws) unless `deterministic`.
 """
 
 from __future__ import annotations
@@ -79,9 +79,9 @@ class LearnedNavigator:
             )
         self.reset()
 
-    def reset(self) -> None:
-        self.planner.reset()
-        self.gen = torch.Generator().manual_seed(0)  # the same draws in every episode, whatever the worker
+    def reset(self, seed: int = 0) -> None:
+        self.planner.reset(seed)
+        self.gen = torch.Generator().manual_seed(seed)  # the episode's draws, whatever the worker
         self.state = self.policy.init_state(1, "cpu")
         self.prev = torch.full((1,), -1, dtype=torch.long)
         self.first = True

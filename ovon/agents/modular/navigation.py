@@ -2,7 +2,7 @@
 
     class PointGoalNavigator(Protocol):
         name: str
-        def reset(self) -> None: ...
+        def reset(self, seed: int = 0) -> None: ...
         def act(self, observation: dict, request: NavRequest) -> int | None: ...
 
 `request` holds the odometry pose, the target point in the episodic frame (its polar coordinates `rho`,
@@ -63,7 +63,7 @@ class NavRequest:
 class PointGoalNavigator(Protocol):
     name: str
 
-    def reset(self) -> None: ...
+    def reset(self, seed: int = 0) -> None: ...  # seed: the episode's, for navigators that sample
 
     def act(self, observation: dict, request: NavRequest) -> int | None: ...
 
@@ -112,7 +112,7 @@ class GeometricNavigator:
         self._settle_best = math.inf  # closest approach to the goal point within one step of the radius
         self._settle_steps = 0  # steps there since it last improved
 
-    def reset(self) -> None:
+    def reset(self, seed: int = 0) -> None:
         self._settle_best = math.inf
         self._settle_steps = 0
         self.steering.reset()
