@@ -245,3 +245,22 @@ def test_a_failed_stop_that_does_not_end_the_episode_costs_and_goes_on():
     ends.reset(np.zeros(3))
     ends.update(np.array([0.25, 0.0, 0.0]), stop=True, collided=False)
     assert ends.done and not ends.success and ends.failed_stops == 0
+
+
+def test_best_progress_pays_only_for_a_new_closest_distance():
+    """task.reward.dense_progress=best: walking away costs nothing, coming back pays nothing, a new minimum
+    pays its decrease; "delta" (the paper's) pays every change."""
+    reward = RewardConfig(dense_slack=0.0, dense_progress="best")
+    t = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL}), TaskConfig(reward=reward))
+    t.reset(np.zeros(3))
+    got = []
+    for x in (0.5, 0.25, 0.0, 0.5, 1.0, 1.5):
+        t.update(np.array([x, 0.0, 0.0]), stop=False, collided=False)
+        got.append(t.reward())
+    assert got == pytest.approx([0.5, 0.0, 0.0, 0.0, 0.5, 0.5])
+    delta = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL}),
+                           TaskConfig(reward=RewardConfig(dense_slack=0.0)))
+    delta.reset(np.zeros(3))
+    delta.update(np.array([0.5, 0.0, 0.0]), stop=False, collided=False)
+    delta.update(np.array([0.25, 0.0, 0.0]), stop=False, collided=False)
+    assert delta.reward() == pytest.approx(-0.25)

@@ -12,6 +12,12 @@ from ovon.config.base import in_range, less, non_negative, positive
 class RewardConfig:
     kind: Literal["dense", "sparse"] = "dense"
     dense_success: float = 2.5
+    # The distance term: "delta" = minus the change of the geodesic distance to the goal (the paper's);
+    # "best" = the decrease of the smallest distance reached so far this episode (0 when not closer than ever
+    # before; a walk away costs nothing and coming back pays nothing, so it cannot be farmed). RL from scratch
+    # at CPU scale: started near a goal it cannot see, a random step more often leads away than toward it,
+    # and "delta" taught PPO to turn in place.
+    dense_progress: Literal["delta", "best"] = "delta"
     dense_slack: float = -0.01  # paper; upstream code used -0.001
     # Added when STOP is called outside the success region (paper: 0). RL from scratch at CPU scale:
     # ending the episode at once avoids every later slack penalty, and PPO collapses to STOP-at-once

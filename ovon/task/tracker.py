@@ -81,6 +81,8 @@ class EpisodeTracker:
         self.d0 = float(self.distance_fn(self.position))
         self.distance = self.d0
         self.prev_distance = self.d0
+        self.best_distance = self.d0  # the smallest distance reached so far this episode
+        self.prev_best = self.d0
         self.path_length = 0.0
         self.steps = 0
         self.collisions = 0
@@ -137,6 +139,9 @@ class EpisodeTracker:
         self.last_collided = bool(collided)
         self.prev_distance = self.distance
         self.distance = float(self.distance_fn(position))
+        self.prev_best = self.best_distance
+        if self.distance < self.best_distance:
+            self.best_distance = self.distance
         inside = self.distance < self.cfg.success_distance
         if inside:
             self.entered_region = True
@@ -164,7 +169,10 @@ class EpisodeTracker:
         if r.kind == "dense":
             if self.success:
                 return r.dense_success
-            delta = self.distance - self.prev_distance
+            if r.dense_progress == "best":
+                delta = self.best_distance - self.prev_best
+            else:
+                delta = self.distance - self.prev_distance
             if not math.isfinite(delta):
                 delta = 0.0
             failed_stop = r.dense_failed_stop if (self.called_stop or self.stopped_outside) else 0.0
