@@ -593,7 +593,9 @@ class Client:
                 pass
         self._socket.disable_monitor()
         self._monitor.close(0)
-        self._socket.close(linger=200)  # lets the close message leave, never waits longer
+        # lets the close message leave (a loaded machine needed more than 200 ms); waits only while it is
+        # still queued, i.e. at most this long when the server is gone
+        self._socket.close(linger=2000)
         self._context.term()
 
 
