@@ -464,3 +464,15 @@ def test_learned_navigator_samples_with_the_episodes_seed(tiny_policy: Path) -> 
 
     assert draws(3) == draws(3)
     assert draws(3) != draws(4)
+
+
+def test_checkpoint_task_evaluates_with_every_stop_ending_the_episode(tmp_path: Path, tiny_policy: Path) -> None:
+    """A policy trained with task.failed_stop_ends=false is evaluated under the task's rule, not refused."""
+    from ovon.evaluate.pointnav import checkpoint_task
+
+    saved = torch.load(tiny_policy, map_location="cpu", weights_only=True)
+    saved["extra"]["task"]["failed_stop_ends"] = False
+    path = tmp_path / "policy.pt"
+    torch.save(saved, path)
+    task = checkpoint_task(str(path))
+    assert task.failed_stop_ends and task.max_steps == checkpoint_task(str(tiny_policy)).max_steps

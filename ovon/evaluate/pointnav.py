@@ -43,7 +43,10 @@ def pointnav_defaults() -> dict[str, Any]:
 
 
 def checkpoint_task(checkpoint: str | None) -> TaskConfig:
-    """The task a PointNav checkpoint was trained with, else the cpu-small PointNav preset's."""
+    """The task a PointNav checkpoint was trained with, else the cpu-small PointNav preset's; under the
+    evaluation's rule that every STOP ends the episode (`failed_stop_ends` false is a training setting)."""
+    import dataclasses
+
     from ovon.config.base import from_dict
     from ovon.config.task import pointnav_task
 
@@ -56,7 +59,7 @@ def checkpoint_task(checkpoint: str | None) -> TaskConfig:
             extra = torch.load(path, map_location="cpu", weights_only=True).get("extra") or {}
             task = extra.get("task")
             if task:
-                return from_dict(TaskConfig, task)
+                return dataclasses.replace(from_dict(TaskConfig, task), failed_stop_ends=True)
     return pointnav_task()
 
 
