@@ -27,6 +27,10 @@ class RewardConfig:
     # scratch at CPU scale: progress alone leaves PPO turning in place; this makes the early policy explore.
     dense_coverage: float = 0.0
     coverage_range_m: float = positive(3.0)
+    # The cone that counts as covered: 0 = the camera's horizontal field of view (floor *seen*, which turning
+    # in place also gains); 360 = every direction within `coverage_range_m` (floor *visited*: only moving
+    # gains it, the count-based exploration bonus that turning cannot farm).
+    coverage_fov_deg: float = in_range(0.0, 0.0, 360.0)
     # Per unit of the largest fraction of the frame that has shown goal instances so far in the episode (the
     # reward is its increase, so looking at the goal again pays nothing; at most this much per episode;
     # paper: 0). RL from scratch at CPU scale: the distance reward alone says nothing the agent can see until

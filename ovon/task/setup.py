@@ -75,7 +75,7 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
     if task.reward.kind == "dense" and task.reward.dense_coverage != 0.0:
         from ovon.task.coverage import Coverage
 
-        coverage = Coverage(grid, fov_deg, task.reward.coverage_range_m)
+        coverage = Coverage(grid, task.reward.coverage_fov_deg or fov_deg, task.reward.coverage_range_m)
     tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=goal_ids, cfg=task,
                              distractors=distractors(world.scene, spec.goal_categories), coverage=coverage,
                              object_distance_fn=lambda p: object_floor_distance(on_floor, p))
