@@ -433,6 +433,45 @@ def test_a_training_cell_killed_after_update_k_continues_to_the_same_weights(tmp
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
+@pytest.mark.slow
+def test_a_finished_training_cell_trains_further_when_its_budget_grows(tmp_path: Path) -> None:
+    """A larger budget resumes the finished run (to the weights of a run given that budget from the start);
+    its evaluation is refused until redone; a smaller budget is a change, never a cut."""
+    from ovon.experiments.state import last_update
+    from ovon.models.policy import ActorCritic
+
+    def plan(root: Path, updates: int, *extra: str):
+        # the evaluation named like its training (as in `main`): a bare `--redo r-ppo` would retrain
+        text = RESUME.replace("max_updates: 10", f"max_updates: {updates}").replace("r-eval", "r-ppo")
+        exp = _write(tmp_path / f"budget{updates}.yaml", text)
+        return resolve([load_experiment(str(exp))], "tiny", root, [*TINY_SET, *extra])
+
+    root = tmp_path / "root"
+    first = run(plan(root, 3), only=["train:r-ppo", "eval:r-ppo"], write_report=False, console=quiet())
+    assert first.ran == ["data:data", "train:r-ppo", "eval:r-ppo"] and first.ok
+    longer = plan(root, 5)
+    statuses = run(longer, dry_run=True, console=quiet()).statuses
+    assert (statuses["train:r-ppo"].state, statuses["train:r-ppo"].detail) == (
+        "partial", "to extend: --set max_updates=3 -> --set max_updates=5")
+    assert statuses["eval:r-ppo"].state == "changed" and "train:r-ppo, which it reads" in statuses["eval:r-ppo"].detail
+    with pytest.raises(DefinitionError, match="fix: --redo eval:r-ppo recomputes"):
+        run(longer, write_report=False, console=quiet())
+    again = run(longer, redo_cells=["eval:r-ppo"], write_report=False, console=quiet())
+    assert again.ran == ["train:r-ppo", "eval:r-ppo"] and again.ok
+    folder = root / "tiny" / "train" / "r-ppo"
+    assert last_update(folder) == 5 and _record(root, "train:r-ppo")["attempts"] == 2
+    assert "--resume" in (root / "tiny" / "logs" / "train-r-ppo.log").read_text()
+    data = root / "tiny" / "data"
+    straight = plan(tmp_path / "straight", 5, "data.source=paths", f"data.episodes={data / 'episodes'}",
+                    f"data.scenes={data / 'scenes'}")
+    assert run(straight, only=["train:r-ppo"], write_report=False, console=quiet()).ran == ["train:r-ppo"]
+    a = ActorCritic.load(folder / "policy.pt").state_dict()
+    b = ActorCritic.load(tmp_path / "straight" / "tiny" / "train" / "r-ppo" / "policy.pt").state_dict()
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    shorter = run(plan(root, 4), dry_run=True, console=quiet()).statuses["train:r-ppo"]
+    assert shorter.state == "changed" and "max_updates 5 -> 4 (a finished training is never cut back)" in shorter.detail
+
+
 def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:
     from ovon.experiments.state import cell_lock, cell_status, lock_holder
 

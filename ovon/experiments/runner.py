@@ -258,7 +258,11 @@ def _preflight(plan: Plan, ids: list[str], statuses: dict[str, Status], redone: 
     stale = [c for c in ids if statuses[c].state == "changed" and c not in redone]
     if stale:
         changed = [f"{c} ({statuses[c].detail})" for c in stale]
-        names = ",".join(c.split(":", 1)[1] for c in stale)
+        from ovon.experiments.select import match_cells
+
+        # a bare name (`rl`) takes the cell's training and evaluation: only where both are stale
+        names = ",".join(dict.fromkeys(
+            bare if set(match_cells(plan, [bare := c.split(":", 1)[1]])) <= set(stale) else c for c in stale))
         raise DefinitionError(f"cell(s) changed since they ran: {'; '.join(changed)}; fix: --redo {names} recomputes "
                               "them and what depends on them (old folders are kept as <folder>.old-N), or restore "
                               "the definition")

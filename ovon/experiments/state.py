@@ -30,6 +30,11 @@ from ovon.runfolder import FileLock, RunFolderError, differences
 # result (the evaluation resumes and adds what is missing), and the one that marks a training resume.
 EVAL_MAY_CHANGE = ("--seeds", "--episodes", "--splits", "--workers", "--executor", "--no-progress")
 FLAGS = ("--no-progress", "--resume")
+# A training cell's budget may grow after it finished: the runner resumes its folder to the new budget (no
+# schedule depends on the budget, so the result is the run trained that long from the start). A smaller
+# budget makes the cell "changed": a finished training is never cut back.
+TRAIN_BUDGET = ("max_updates", "total_steps")
+EXTEND = "to extend"  # the detail of a finished cell whose budget, seeds, episodes or splits grew
 ROOT_TOKEN, EPISODES_TOKEN, SCENES_TOKEN = "$ROOT", "$EPISODES", "$SCENES"
 TOKENS = (ROOT_TOKEN, EPISODES_TOKEN, SCENES_TOKEN)
 
@@ -148,8 +153,32 @@ def identity(plan: Plan, cell: Cell, legacy: bool = False) -> list[str]:
                 skip = a not in FLAGS
                 continue
             kept.append(a)
-        out.append(portable_display(plan, cell, kept, legacy))
+        out.append(portable_display(plan, cell, without_budget(kept) if cell.kind == "train" else kept, legacy))
     return out
+
+
+def without_budget(words: list[str]) -> list[str]:
+    """A training command's words without its `--set` budget options (`TRAIN_BUDGET`)."""
+    out: list[str] = []
+    i = 0
+    while i < len(words):
+        if words[i] == "--set" and i + 1 < len(words) and words[i + 1].partition("=")[0] in TRAIN_BUDGET:
+            i += 2
+            continue
+        out.append(words[i])
+        i += 1
+    return out
+
+
+def _recorded_identity(rec: dict, cell: Cell) -> list[str] | None:
+    """The record's identity; a training record written before budgets could grow still names its budget."""
+    ident = rec.get("identity")
+    if cell.kind != "train" or not isinstance(ident, list):
+        return ident
+    try:
+        return [shlex.join(without_budget(shlex.split(c))) for c in ident]
+    except ValueError:
+        return ident
 
 
 def _in_form_of(recorded: list[str] | None, plan: Plan, cell: Cell, what) -> list[str]:
@@ -193,7 +222,7 @@ def first_difference(old: list[str], new: list[str]) -> str:
 # checkpoint) are compared by content (`inputs`), not by path.
 CONFIG_MAY_CHANGE = {
     "train": ("env_workers", "threads", "rollout_threads", "device", "encoder.device", "progress", "log_every",
-              "checkpoint_every", "keep_checkpoints", "text_cache", "bc.record_workers"),
+              "checkpoint_every", "keep_checkpoints", "text_cache", "bc.record_workers", *TRAIN_BUDGET),
     "eval": ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "name"),
     "data": (),
 }
@@ -260,9 +289,24 @@ def config_change(plan: Plan, cell: Cell, record: dict) -> str:
     if now is None:
         return ""
     diffs = differences(old, now, CONFIG_MAY_CHANGE[cell.kind])
+    if cell.kind == "train":
+        diffs = budget_shrunk(old, now) + diffs
     if not diffs:
         return ""
     return diffs[0] + (f" (and {len(diffs) - 1} more)" if len(diffs) > 1 else "")
+
+
+def budget_shrunk(old: dict, now: dict) -> list[str]:
+    """The budget keys of a training config that went down (`max_updates` 0 = no cap)."""
+    out = []
+    for key in TRAIN_BUDGET:
+        a, b = old.get(key), now.get(key)
+        if not (isinstance(a, int) and isinstance(b, int)):
+            continue
+        cap_a, cap_b = (a or float("inf"), b or float("inf")) if key == "max_updates" else (a, b)
+        if cap_b < cap_a:
+            out.append(f"{key} {a} -> {b} (a finished training is never cut back)")
+    return out
 
 
 def config_unknown(plan: Plan, ids: list[str]) -> list[str]:
@@ -419,8 +463,9 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
     rec = read_record(plan, cell)
     if rec is not None and rec.get("state") == "unreadable":
         return Status("changed", f"its record {record_path(plan, cell)} is unreadable")
-    if rec is not None and not same_commands(rec.get("identity"), plan, cell, identity):
-        why = first_difference(rec.get("identity") or [], _in_form_of(rec.get("identity"), plan, cell, identity))
+    recorded_identity = _recorded_identity(rec, cell) if rec is not None else None
+    if rec is not None and not same_commands(recorded_identity, plan, cell, identity):
+        why = first_difference(recorded_identity or [], _in_form_of(recorded_identity, plan, cell, identity))
         return Status("changed", f"the definition changed since it ran: {why}")
     why = config_change(plan, cell, rec) if rec is not None else ""
     if why:
@@ -430,10 +475,14 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
         moved = [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
         if moved:
             return Status("changed", f"its input(s) {', '.join(moved)} changed since it ran")
+        extended = [d for d in cell.deps if statuses.get(d, Status("done")).state == "partial"
+                    and statuses[d].detail.startswith(EXTEND)]
+        if extended:
+            return Status("changed", f"{', '.join(extended)}, which it reads, is to be extended")
         if not same_commands(rec.get("commands"), plan, cell, full_commands):
             why = first_difference(rec.get("commands") or [], _in_form_of(rec.get("commands"), plan, cell,
                                                                          full_commands))
-            return Status("partial", f"to extend: {why}")
+            return Status("partial", f"{EXTEND}: {why}")
         return Status("done", f"{rec.get('wall_s', 0) / 60:.1f} min")
     waiting = [d for d in cell.deps if statuses.get(d, Status("done")).state != "done"]
     if waiting:
