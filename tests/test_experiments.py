@@ -29,6 +29,7 @@ from ovon.experiments import (
     run,
     select,
 )
+from ovon.experiments.plan import train_spec
 from ovon.experiments.report import experiment_results
 from ovon.experiments.select import DATA
 
@@ -54,11 +55,12 @@ def test_every_definition_resolves_at_every_scale(scale: str, tmp_path: Path) ->
     plan = resolve(all_experiments(), scale, tmp_path)
     trains = {c.name: c for c in plan.cells.values() if c.kind == "train"}
     evals = {c.name: c for c in plan.cells.values() if c.kind == "eval"}
-    assert len(trains) == 14 and len(evals) == 20
+    # RL from scratch is two cells (rl-warmup, rl) below paper scale
+    assert len(trains) == (14 if scale == "paper" else 16) and len(evals) == 20
     recipes = load_catalogue().recipes
     for name, cell in trains.items():
         assert isinstance(cell.train_cfg, TrainConfig), name
-        assert cell.train_cfg.algo == recipes[load_catalogue().train[name].recipe].algo
+        assert cell.train_cfg.algo == recipes[train_spec(load_catalogue().train[name], scale)[0]].algo
         assert all(d in plan.cells for d in cell.deps), name
         assert cell.folder == tmp_path / scale / "train" / name
         if "--init" in cell.commands[0]:
@@ -94,7 +96,8 @@ def test_cells_shared_between_experiments_are_one_run_folder(tmp_path: Path) -> 
     for cid in ("train:dagger", "train:dagrl", "eval:dagrl"):
         assert main.cells[cid].commands == memory.cells[cid].commands == both.cells[cid].commands
         assert main.cells[cid].folder == memory.cells[cid].folder
-    assert len([c for c in both.cells if c.startswith("train:")]) == 10  # 5 transformer + 5 LSTM, once each
+    # 5 transformer + 5 LSTM, once each, RL from scratch in two phases
+    assert len([c for c in both.cells if c.startswith("train:")]) == 12
 
 
 def test_every_table_entry_has_the_papers_numbers_and_they_satisfy_its_findings() -> None:
@@ -470,6 +473,21 @@ def test_a_finished_training_cell_trains_further_when_its_budget_grows(tmp_path:
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     shorter = run(plan(root, 4), dry_run=True, console=quiet()).statuses["train:r-ppo"]
     assert shorter.state == "changed" and "max_updates 5 -> 4 (a finished training is never cut back)" in shorter.detail
+
+
+def test_a_training_cell_may_take_another_recipe_and_init_at_a_scale(tmp_path: Path) -> None:
+    """`rl` is two PPO phases at cpu scale (rl-warmup, then rl-continue from it) and the paper's one at paper
+    scale, where the first phase is then no cell at all."""
+    cpu = resolve([load_experiment("main")], "cpu", tmp_path)
+    assert cpu.cells["train:rl"].deps == ("data:data", "train:rl-warmup")
+    assert "--init" in cpu.cells["train:rl"].commands[0] and cpu.cells["train:rl"].train_cfg.max_updates == 300
+    paper = resolve([load_experiment("main")], "paper", tmp_path)
+    assert paper.cells["train:rl"].deps == ("data:data",) and "train:rl-warmup" not in paper.cells
+    assert "--init" not in paper.cells["train:rl"].commands[0]
+    assert paper.cells["train:rl"].train_cfg.total_steps == 150_000_000
+    bad = _write(tmp_path / "bad.yaml", RESUME.replace("{tiny: {set:", "{tiny: {init: ghost, set:"))
+    with pytest.raises(DefinitionError, match="ghost"):
+        resolve([load_experiment(str(bad))], "tiny", tmp_path)
 
 
 def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:

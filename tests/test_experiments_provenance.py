@@ -128,9 +128,10 @@ def test_records_from_before_tokens_and_configs_stay_done_and_the_runner_says_so
     assert text.count("ran before ovon recorded resolved configs (train:dagger)") == 1
     assert re.search(r"^train:dagger +done \(1.0 min\)$", text, re.M)
     # an old record whose command differs names the real difference, not the form of its paths
-    _done(plan, "train:dagger", identity=[c.replace("max_updates=400", "max_updates=300") for c in old], config=...)
+    _done(plan, "train:dagger", identity=[c.replace("--expert frontier", "--expert shortest-path") for c in old],
+          config=...)
     assert cell_status(plan, cell, {}).detail == (
-        "the definition changed since it ran: --set max_updates=300 -> --set max_updates=400"
+        "the definition changed since it ran: --expert shortest-path -> --expert frontier"
     )
     _done(plan, "train:dagger", identity=old, config=...)
     build_report(plan, tmp_path / "report")

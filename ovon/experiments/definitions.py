@@ -119,6 +119,9 @@ class CellScale:
 
     set: dict = field(default_factory=dict)
     agent_args: dict = field(default_factory=dict)
+    # training cells only: another recipe, or another init ("none" = train from scratch), at this scale
+    recipe: str = ""
+    init: str = ""
 
 
 # ----- experiments -----------------------------------------------------------------------------------

@@ -125,7 +125,7 @@ def resolve(experiments: list[Experiment], scale: str, root: str | Path, overrid
     plan = Plan(list(experiments), sc, Path(root), cat)
     _data_cell(plan)
     eval_names = needed_evals(experiments, cat)
-    for name in train_order(eval_names, cat):
+    for name in train_order(eval_names, cat, scale):
         _train_cell(plan, name)
     for name in eval_names:
         _eval_cell(plan, name)
@@ -171,7 +171,14 @@ def needed_evals(experiments: list[Experiment], cat: Catalogue) -> list[str]:
     return list(out)
 
 
-def train_order(eval_names: list[str], cat: Catalogue) -> list[str]:
+def train_spec(tc: TrainCell, scale: str) -> tuple[str, str]:
+    """(recipe, init) of a training cell at `scale`: its own unless the scale names others ("" = no init)."""
+    per = _per_scale(tc, scale)
+    init = per.init or tc.init
+    return per.recipe or tc.recipe, "" if init == "none" else init
+
+
+def train_order(eval_names: list[str], cat: Catalogue, scale: str) -> list[str]:
     """Training cells the evaluations need (checkpoints, cameras, inits), each after its init."""
     order: list[str] = []
 
@@ -184,7 +191,7 @@ def train_order(eval_names: list[str], cat: Catalogue) -> list[str]:
         if name not in cat.train:
             raise DefinitionError(f"{who} names training cell {name!r}, which is not defined; valid: "
                                   f"{', '.join(sorted(cat.train))}")
-        init = cat.train[name].init
+        init = train_spec(cat.train[name], scale)[1]
         if init:
             visit(init, (*path, name), f"train.{name}.init")
         order.append(name)
@@ -220,14 +227,15 @@ def _train_cell(plan: Plan, name: str) -> None:
     cat, sc = plan.catalogue, plan.scale
     tc = cat.train[name]
     where = f"cells.yaml:train.{name}"
-    if tc.recipe not in cat.recipes:
-        raise DefinitionError(f"{where}.recipe = {tc.recipe!r}; valid: {', '.join(cat.recipes)} (recipes.yaml)")
-    recipe = cat.recipes[tc.recipe]
+    recipe_name, init_name = train_spec(tc, sc.name)
+    if recipe_name not in cat.recipes:
+        raise DefinitionError(f"{where}.recipe = {recipe_name!r}; valid: {', '.join(cat.recipes)} (recipes.yaml)")
+    recipe = cat.recipes[recipe_name]
     if sc.name not in recipe.scales:
-        raise DefinitionError(f"recipes.yaml:{tc.recipe} has no settings for scale {sc.name!r}; fix: add "
+        raise DefinitionError(f"recipes.yaml:{recipe_name} has no settings for scale {sc.name!r}; fix: add "
                               f"scales.{sc.name} (preset and set) to it")
     rs = recipe.scales[sc.name]
-    init = plan.cells.get(f"train:{tc.init}") if tc.init else None
+    init = plan.cells.get(f"train:{init_name}") if init_name else None
     if init is not None and recipe.algo != "ppo":
         raise DefinitionError(f"{where}: init works with a ppo recipe (BC->RL, DAgger->RL), not {recipe.algo!r}")
     folder = plan.base / "train" / name
@@ -251,7 +259,7 @@ def _train_cell(plan: Plan, name: str) -> None:
     if init is not None:
         if tc.policy and tc.policy != init.train_cfg.policy.core:
             raise DefinitionError(f"{where}.policy = {tc.policy!r}, but a fine-tune keeps the core of its init "
-                                  f"{tc.init!r} ({init.train_cfg.policy.core}); fix: drop policy or change the init")
+                                  f"{init_name!r} ({init.train_cfg.policy.core}); fix: drop policy or change the init")
         if init.train_cfg.encoder.image != cell.train_cfg.encoder.image:
             raise DefinitionError(f"{where}: encoder {cell.train_cfg.encoder.image!r} differs from its init's "
                                   f"({init.train_cfg.encoder.image!r}); fix: use the same preset/encoder")
