@@ -43,7 +43,7 @@ def rope_tables(cos: torch.Tensor, sin: torch.Tensor, dtype: torch.dtype) -> tup
 
 
 def apply_rope(x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
-    """Rotate-half RoPE. x (B, h, T, d); cos/sin (B, 1, T, d/2) in x's dtype (`rope_tables`)."""
+    """Rotate-half RoPE. x (..., B, h, T, d); cos/sin (B, 1, T, d/2) in x's dtype (`rope_tables`)."""
     x1, x2 = x.chunk(2, dim=-1)
     return torch.cat([x1 * cos - x2 * sin, x1 * sin + x2 * cos], dim=-1)
 
@@ -62,8 +62,9 @@ class Attention(nn.Module):
 
     def _qkv(self, x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor):
         b, t, _ = x.shape
-        q, k, v = self.qkv(x).view(b, t, 3, self.heads, self.head_dim).permute(2, 0, 3, 1, 4)
-        return apply_rope(q, cos, sin), apply_rope(k, cos, sin), v
+        qkv = self.qkv(x).view(b, t, 3, self.heads, self.head_dim).permute(2, 0, 3, 1, 4)
+        q, k = apply_rope(qkv[:2], cos, sin)  # queries and keys rotated in one go (elementwise: the same numbers)
+        return q, k, qkv[2]
 
     def forward(self, x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         q, k, v = self._qkv(x, cos, sin)
