@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,dagger,dagger-overlap,ppo] [--updates 4]
        [--workers 2] [--houses 0,1] [--text hash|real] [--out benchmarks/results/train_throughput.json]
-       [--baseline-rev REV --repeats 2]
+       [--baseline-rev REV --repeats 2 --warmup 1] [--set KEY=VALUE ...]
 
 With `--baseline-rev REV` (e.g. the tag `baseline-old-stack`, the code before the env-stack rewrite; or
 the directory of an existing worktree of it) this script measures, alternately, this tree and REV's
@@ -10,14 +10,21 @@ the directory of an existing worktree of it) this script measures, alternately, 
 medians, their ratio, the CPU seconds (process tree) of each run, and per algorithm whether every
 logged loss, gradient norm and episode metric of every run equals the baseline's
 (`same_learning_as_baseline`: a speed-up must not change what is learned). Compare ratios from one run:
-the machine is shared and noisy.
+the machine is shared and noisy. Each tree first runs once untimed (`--warmup`): a fresh worktree
+compiles its numba kernels in its first run, which would otherwise count as the baseline's CPU.
+`--set KEY=VALUE` (the CLI's config overrides, e.g. `threads=2`, `ppo.epochs=1`) measures a knob, in
+both trees; a knob that changes the learning shows as `same_learning_as_baseline: false` only against
+a baseline run without it.
 
 `dagger-overlap` is DAgger with `dagger.overlap=true` (learning while the next rollout runs); against
 REV it is compared with REV's plain DAgger. Each online algorithm (DAgger with the configured expert,
 PPO) runs `--updates` updates of the preset on
 ad-hoc episodes in procedural houses, envs in `--workers` processes; the first update (world loading,
 numba compilation) is reported apart. Reported: env steps/s over whole updates (rollout + learning),
-rollout-only steps/s, and the learn (train-step) time. BC records `--bc-episodes` expert episodes, then
+rollout-only steps/s, the learn (train-step) time, CPU ms per env step over the whole run
+(`cpu_ms_per_step`, set-up included) and in steady state (`steady_cpu_ms_per_step`: this process and
+its env workers from the second rollout's start to the last one's), and from the latter the CPU-bound
+rate (steps/s with `workers` cores busy all the time, an upper bound). BC records `--bc-episodes` expert episodes, then
 reports the recording rate and the time of one BC update (batch `bc.batch_chunks` chunks of <= context
 steps). `--text hash` replaces the text encoder by fixed random vectors of the same size (384) so the
 benchmark does not time loading MiniLM; the per-step cost is the same.
@@ -63,13 +70,17 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
     if algo == "dagger-overlap":
         cfg = dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=True))
     t0, c0 = time.perf_counter(), _tree_cpu()
-    train(dataclasses.replace(cfg, algo=algo.removesuffix("-overlap")), specs, out)
+    with _SteadyCPU() as marks:
+        train(dataclasses.replace(cfg, algo=algo.removesuffix("-overlap")), specs, out)
     wall, cpu = time.perf_counter() - t0, _tree_cpu() - c0
     rows = read_metrics(out)
     steady = rows[1:] or rows
     steps = cfg.num_envs * cfg.rollout_steps
     rollout = _stats(steady, "time/rollout_s")
     return {
+        # CPU (this process + env workers) from the start of the second rollout to the start of the last
+        # one, per env step: set-up, world loading and numba compilation left out
+        "steady_cpu_ms_per_step": marks.ms_per_step(steps),
         "learning": _learning(rows),
         "updates": len(rows),
         "steps_per_update": steps,
@@ -84,6 +95,37 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
         "cpu_s": cpu,
         "cpu_ms_per_step": 1000.0 * cpu / max(1, len(rows) * steps),
     }
+
+
+class _SteadyCPU:
+    """Marks (CPU of this process, CPU of the env workers) at the start of every rollout, by wrapping
+    `RolloutCollector.collect` while training runs."""
+
+    def __init__(self) -> None:
+        self.marks: list[float] = []
+
+    def __enter__(self) -> _SteadyCPU:
+        from ovon.env.bench import _cpu_seconds
+        from ovon.train import collect
+
+        self.cls, self.orig = collect.RolloutCollector, collect.RolloutCollector.collect
+        orig, marks = self.orig, self.marks
+
+        def collect_marked(collector, *args, **kwargs):
+            pids = getattr(collector.envs.vec, "worker_pids", [])
+            marks.append(time.process_time() + (_cpu_seconds(pids) if pids else 0.0))
+            return orig(collector, *args, **kwargs)
+
+        self.cls.collect = collect_marked
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.cls.collect = self.orig
+
+    def ms_per_step(self, steps_per_update: int) -> float | None:
+        if len(self.marks) < 3:
+            return None
+        return 1000.0 * (self.marks[-1] - self.marks[1]) / ((len(self.marks) - 2) * steps_per_update)
 
 
 def _tree_cpu() -> float:
@@ -136,8 +178,19 @@ def compare(args) -> None:
                    "--text", args.text, "--bc-episodes", str(args.bc_episodes)]
     if args.envs:
         passthrough += ["--envs", str(args.envs)]
+    for item in args.set:
+        passthrough += ["--set", item]
     runs: dict[str, list[dict]] = {"current": [], "baseline": []}
+    load_before = os.getloadavg()
     try:
+        if args.warmup:  # untimed: a fresh worktree compiles (and caches) every numba kernel in its first run
+            i = passthrough.index("--updates")
+            warm = [*passthrough[:i], "--updates", "1", *passthrough[i + 2:]]
+            for name, root in (("baseline", base), ("current", here)):
+                algos_of = base_algos if name == "baseline" else args.algos
+                subprocess.run([sys.executable, str(Path(__file__).resolve()), *warm, "--algos", algos_of,
+                                "--out", str(tmp / f"warm-{name}.json")], cwd=root, check=True, capture_output=True,
+                               env={**os.environ, "PYTHONPATH": str(root), "OVON_BENCH_TREE": str(root)})
         for rep in range(args.repeats):
             for name, root in (("baseline", base), ("current", here)):
                 out = tmp / f"{name}{rep}.json"
@@ -157,8 +210,9 @@ def compare(args) -> None:
             subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(base)], capture_output=True)
         shutil.rmtree(tmp, ignore_errors=True)
     rev = tree_commit(base) if Path(args.baseline_rev).is_dir() else args.baseline_rev
-    summary: dict = {"baseline_rev": rev, "repeats": args.repeats, "preset": args.preset,
+    summary: dict = {"baseline_rev": rev, "set": args.set, "repeats": args.repeats, "preset": args.preset,
                      "houses": args.houses, "updates": args.updates, "load_average": os.getloadavg(),
+                     "warmup": args.warmup, "load_average_before": load_before,
                      "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {},
                      "runs": runs}
     for algo in [a for a in algos if a != "bc"]:
@@ -168,17 +222,27 @@ def compare(args) -> None:
                    for n, rs in runs.items()}
         cpu = {n: float(np.median([r["algos"][key[n]].get("cpu_ms_per_step", np.nan) for r in rs]))
                for n, rs in runs.items()}
+        steady = {n: float(np.median([r["algos"][key[n]].get("steady_cpu_ms_per_step") or np.nan for r in rs]))
+                  for n, rs in runs.items()}
+        cores = min(args.workers, os.cpu_count() or 1) if args.workers > 0 else 1
         summary["algos"][algo] = {"env_steps_per_s": med, "rollout_steps_per_s": rollout,
                                   "ratio": med["current"] / med["baseline"],
                                   "rollout_ratio": rollout["current"] / rollout["baseline"],
-                                  "cpu_ms_per_step": cpu, "cpu_ratio": cpu["baseline"] / cpu["current"]}
+                                  "cpu_ms_per_step": cpu, "cpu_ratio": cpu["baseline"] / cpu["current"],
+                                  "steady_cpu_ms_per_step": steady,
+                                  "steady_cpu_ratio": steady["baseline"] / steady["current"],
+                                  # the rate with `cores` idle cores kept busy all the time (an upper bound:
+                                  # acting and learning leave the env workers' cores idle)
+                                  "cpu_bound_steps_per_s": {n: 1000.0 * max(cores, 1) / v for n, v in steady.items()}}
         entry = summary["algos"][algo]
         if algo == key["baseline"]:  # a variant (dagger-overlap) learns differently by design
             learned = [r["algos"][algo].get("learning") for rs in runs.values() for r in rs]
             entry["same_learning_as_baseline"] = all(x is not None and x == learned[0] for x in learned)
         print(f"{algo}: {med['baseline']:.0f} -> {med['current']:.0f} env steps/s including learning "
-              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}; CPU per step "
-              f"{cpu['baseline']:.2f} -> {cpu['current']:.2f} ms (x{entry['cpu_ratio']:.2f}); same losses and episodes "
+              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}; CPU per step (set-up included) "
+              f"{cpu['baseline']:.2f} -> {cpu['current']:.2f} ms (x{entry['cpu_ratio']:.2f}), steady "
+              f"{steady['baseline']:.2f} -> {steady['current']:.2f} ms (x{entry['steady_cpu_ratio']:.2f}, CPU-bound "
+              f"{entry['cpu_bound_steps_per_s']['current']:.0f} steps/s); same losses and episodes "
               f"as the baseline: {entry.get('same_learning_as_baseline', 'n/a')}")
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=1))
@@ -227,6 +291,10 @@ def main() -> None:
     ap.add_argument("--baseline-rev", help="git revision, or the directory of a worktree of it, to compare against "
                     "(alternating runs, fresh processes)")
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override (as `ovon train --set`), repeatable")
+    ap.add_argument("--warmup", type=int, default=1, help="with --baseline-rev: one untimed 1-update run per tree "
+                    "first (numba compiles into a fresh worktree's cache), 0 = none")
     args = ap.parse_args()
     if args.baseline_rev:
         compare(args)
@@ -239,6 +307,10 @@ def main() -> None:
                        progress=False, checkpoint_every=10**9, text_cache=str(root / "text.pt"))
     if args.envs:
         cfg = dataclasses.replace(cfg, num_envs=args.envs)
+    if args.set:
+        from ovon.config.base import merge, parse_overrides
+
+        cfg = merge(cfg, parse_overrides(args.set))
     if args.text == "hash":
         texts = needed_texts(specs)
         write_text_table(root / "text.pt", {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(384)
@@ -249,8 +321,8 @@ def main() -> None:
               "preset": args.preset, "num_envs": cfg.num_envs, "env_workers": cfg.env_workers,
               "rollout_steps": cfg.rollout_steps, "camera": [cfg.sim.camera.width, cfg.sim.camera.height],
               "policy": dataclasses.asdict(cfg.policy), "encoder": cfg.encoder.image, "expert": args.expert,
-              "houses": args.houses, "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
-              "algos": {}}
+              "houses": args.houses, "set": args.set,
+              "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {}}
     try:
         for algo in [a for a in args.algos.split(",") if a]:
             t = time.perf_counter()

@@ -289,3 +289,36 @@ def test_oracle_collision_flag_is_the_last_dim():
     assert image_encoder_dim(cfg, 4) == 13
     with pytest.raises(KeyError, match="collided"):
         enc.encode({"semantic": batch["semantic"], "depth": batch["depth"]})
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.5])
+def test_oracle_single_frame_path_equals_the_batch_path(noise: float) -> None:
+    """`encode_observation` (the env's wrapper, every step) takes the oracle's one-frame path; its
+    output is bitwise the batch path's, noise stream included."""
+    from ovon.models.encoders import encode_observation
+
+    rng = np.random.default_rng(0)
+
+    def encoder() -> OracleVLEncoder:
+        enc = OracleVLEncoder(
+            _fake_text(),
+            grid=2,
+            include_global=True,
+            noise_std=noise,
+            dropout=0.2 * (noise > 0),
+            seed=3,
+            depth_grid=(3, 2),
+            collision=True,
+        )
+        enc.set_scene(SCENE)
+        return enc
+
+    one, batch = encoder(), encoder()
+    for _ in range(4):
+        sem = rng.integers(-1, 5, size=(12, 10)).astype(np.int32)
+        obs = {"depth": rng.uniform(0.0, 6.0, size=(12, 10)).astype(np.float32), "collided": int(rng.integers(2))}
+        got = encode_observation(one, obs, sem)
+        ref = batch.encode(
+            {"semantic": sem[None], "depth": obs["depth"][None], "collided": np.array([obs["collided"]])}
+        )[0].numpy()
+        assert got.dtype == np.float32 and got.tobytes() == ref.tobytes()

@@ -103,11 +103,11 @@ class ActorCritic(nn.Module):
     def _project(self, obs_emb: torch.Tensor, prev_actions: torch.Tensor, starts: torch.Tensor | None):
         if obs_emb.shape[-1] != self.obs_dim:
             raise ValueError(f"obs_emb last dim {obs_emb.shape[-1]} != image_dim + text_dim = {self.obs_dim}")
-        idx = (prev_actions.long() + 1).clamp(0, self.cfg.num_actions)
-        if starts is not None:
-            idx = torch.where(starts.bool(), torch.zeros_like(idx), idx)
         x = [obs_emb]
         if self.prev_action_emb is not None:
+            idx = (prev_actions.long() + 1).clamp(0, self.cfg.num_actions)
+            if starts is not None:
+                idx = torch.where(starts.bool(), torch.zeros_like(idx), idx)
             x.append(self.prev_action_emb(idx).to(obs_emb.dtype))
         if self.sim_parts:
             x.append(self.goal_similarity(obs_emb))

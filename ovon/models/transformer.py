@@ -36,10 +36,14 @@ def rope_cos_sin(positions: torch.Tensor, head_dim: int, base: float) -> tuple[t
     return ang.cos(), ang.sin()
 
 
+def rope_tables(cos: torch.Tensor, sin: torch.Tensor, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    """cos/sin (B, T, d/2) -> (B, 1, T, d/2) in `dtype`: what `apply_rope` multiplies by, made once per
+    forward (not per layer and per q / k)."""
+    return cos[:, None].to(dtype), sin[:, None].to(dtype)
+
+
 def apply_rope(x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
-    """Rotate-half RoPE. x (B, h, T, d); cos/sin (B, T, d/2)."""
-    cos = cos[:, None].to(x.dtype)
-    sin = sin[:, None].to(x.dtype)
+    """Rotate-half RoPE. x (..., B, h, T, d); cos/sin (B, 1, T, d/2) in x's dtype (`rope_tables`)."""
     x1, x2 = x.chunk(2, dim=-1)
     return torch.cat([x1 * cos - x2 * sin, x1 * sin + x2 * cos], dim=-1)
 
@@ -58,8 +62,9 @@ class Attention(nn.Module):
 
     def _qkv(self, x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor):
         b, t, _ = x.shape
-        q, k, v = self.qkv(x).view(b, t, 3, self.heads, self.head_dim).permute(2, 0, 3, 1, 4)
-        return apply_rope(q, cos, sin), apply_rope(k, cos, sin), v
+        qkv = self.qkv(x).view(b, t, 3, self.heads, self.head_dim).permute(2, 0, 3, 1, 4)
+        q, k = apply_rope(qkv[:2], cos, sin)  # queries and keys rotated in one go (elementwise: the same numbers)
+        return q, k, qkv[2]
 
     def forward(self, x: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         q, k, v = self._qkv(x, cos, sin)
@@ -185,7 +190,7 @@ class TransformerCore(nn.Module):
         self.norm = nn.RMSNorm(hidden, eps=eps)
 
     def _run(self, x: torch.Tensor, positions: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        cos, sin = rope_cos_sin(positions, self.head_dim, self.rope_base)
+        cos, sin = rope_tables(*rope_cos_sin(positions, self.head_dim, self.rope_base), x.dtype)
         for blk in self.blocks:
             x = blk(x, cos, sin, mask)
         return self.norm(x)
@@ -237,16 +242,16 @@ class TransformerCore(nn.Module):
         (that env's window is cleared first). Returns (B,H) and the state (updated in place)."""
         if done_mask is not None:
             done = done_mask.to(device=x.device, dtype=torch.bool)
-            state.valid[done] = False
+            state.valid.masked_fill_(done[:, None], False)
             if isinstance(state, KVState):
-                state.pos[done] = 0
+                state.pos.masked_fill_(done, 0)
             else:
-                state.next_pos[done] = 0
+                state.next_pos.masked_fill_(done, 0)
         if isinstance(state, RecomputeState):
             return self._step_recompute(x, state)
         slot = state.slot
         state.valid[:, slot] = True
-        cos, sin = rope_cos_sin(state.pos[:, None], self.head_dim, self.rope_base)
+        cos, sin = rope_tables(*rope_cos_sin(state.pos[:, None], self.head_dim, self.rope_base), x.dtype)
         h = x[:, None]
         for i, blk in enumerate(self.blocks):
             h = blk.step(h, cos, sin, state.k[i], state.v[i], slot, state.valid)

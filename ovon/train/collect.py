@@ -85,7 +85,7 @@ class RolloutCollector:
             labels.append(b.label)
             if t == steps:
                 break
-            with torch.no_grad():
+            with torch.inference_mode():  # no autograd bookkeeping at all (cheaper than no_grad per op)
                 obs = actor.make_obs(features(actor, map_images(b.image, lambda x: x.to(dev))), b.goal.to(dev))
                 logits, _, self.act_state = actor.act_step(obs, self.prev_action, self.act_state, b.first.to(dev))
                 action, logp = choose(logits, b)

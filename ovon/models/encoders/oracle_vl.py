@@ -160,6 +160,16 @@ class OracleVLEncoder:
 
         return depth_grid_features(depth, self.depth_grid, self.max_depth)
 
+    def encode_one(self, semantic: np.ndarray, depth: np.ndarray | None, collided: int = 0) -> np.ndarray:
+        """One frame -> (dim,) float32, equal to `encode` of a batch of one without its batching (the env's
+        encoding wrapper calls it every step)."""
+        parts = [self.encode_frame(np.asarray(semantic), 0)]
+        if self.depth_dim:
+            parts.append(self.encode_depth(np.asarray(depth)))
+        if self.collision:
+            parts.append(np.array([collided], np.float32))
+        return np.concatenate(parts) if len(parts) > 1 else parts[0]
+
     def encode(self, batch: ObsBatch) -> torch.Tensor:
         sem = get_obs(batch, "semantic")
         if isinstance(sem, torch.Tensor):
