@@ -22,7 +22,7 @@ from rich.console import Console
 from ovon.experiments.definitions import DefinitionError
 from ovon.experiments.plan import Cell, Plan, display
 from ovon.experiments.provenance import code_version
-from ovon.experiments.select import select
+from ovon.experiments.select import match_cells, select
 from ovon.experiments.state import (
     Status,
     cell_lock,
@@ -258,7 +258,6 @@ def _preflight(plan: Plan, ids: list[str], statuses: dict[str, Status], redone: 
     stale = [c for c in ids if statuses[c].state == "changed" and c not in redone]
     if stale:
         changed = [f"{c} ({statuses[c].detail})" for c in stale]
-        from ovon.experiments.select import match_cells
 
         # a bare name (`rl`) takes the cell's training and evaluation: only where both are stale
         names = ",".join(dict.fromkeys(
@@ -289,7 +288,6 @@ def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None
         console: Console | None = None) -> RunResult:
     """Run the plan's selected cells (see the module docstring); `wait`: when cells are being run by
     another process, wait for them instead of leaving them (and what needs them) for a later run."""
-    from ovon.experiments.select import match_cells
 
     console = console or Console()
     ids = select(plan, only, shard)

@@ -51,7 +51,8 @@ def _metrics(infos: dict, n: int) -> list[dict]:
     if "final_info" not in infos:
         return []
     out = []
-    for i in range(n):
+    mask = infos.get("_final_info")  # unpack only the envs that ended an episode (the others cost ~0.02 ms each)
+    for i in range(n) if mask is None else (int(j) for j in np.flatnonzero(mask)):
         final = env_info(infos, i).get("final_info")
         if not final or "metrics" not in final:
             continue
