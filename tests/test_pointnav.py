@@ -396,6 +396,35 @@ def test_learned_navigator_heads_for_a_point_on_the_route_within_its_training_ra
     assert nav.act(obs, NavRequest(pose, (6.0, 6.0), "frontier", maps)) is None
 
 
+def test_learned_navigator_keeps_its_route_point_while_it_is_far(tiny_policy: Path) -> None:
+    """A frontier 10 m down an open map, the agent walking toward it: with `waypoint_keep_m` the point given
+    to the policy stays where it was chosen (the policy's memory runs on) until the agent is that close to
+    it; with 0 the point slides ahead with the agent and its memory restarts on every slide over
+    retarget_m. A new target replaces the kept point at once."""
+    from ovon.agents.modular.navigation import NavRequest
+    from ovon.agents.modular.sensors import Pose2D
+
+    obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
+
+    def walk(nav, maps, target=(0.0, -10.0)) -> list:
+        points = []
+        for i in range(12):  # 0.25 m per step along -z, facing the target
+            nav.act(obs, NavRequest(Pose2D(0.0, -0.25 * i, 0.0), target, "frontier", maps))
+            points.append(nav.target)
+        return points
+
+    kept, maps = _learned(tiny_policy, waypoint_keep_m=1.0, stuck_steps=0)
+    points = walk(kept, maps)
+    assert len(set(points)) == 1  # 12 steps = 2.75 m: still more than 1 m from a point ~subgoal_m ahead
+    sliding, maps2 = _learned(tiny_policy, stuck_steps=0)
+    points2 = walk(sliding, maps2)
+    assert len(set(points2)) > 1 and points2[0] == points[0]
+    kept.act(obs, NavRequest(Pose2D(0.0, -3.0, 0.0), (4.0, -3.0), "frontier", maps))  # a new frontier
+    assert kept.target == (4.0, -3.0)
+    with pytest.raises(ValueError, match="waypoint_keep_m"):
+        _learned(tiny_policy, waypoint_keep_m=-1.0)
+
+
 def test_learned_navigator_hands_the_final_approach_and_getting_unstuck_to_the_geometric_one(
     tiny_policy: Path,
 ) -> None:

@@ -91,6 +91,11 @@ class NavigatorConfig:
     # 8-10 m away behind a wall, out of the 1-6 m the policy trained on, had it bump into that wall until the
     # step limit
     subgoal_m: float = 0.0
+    # learned: the route point given to the policy stays fixed while it is further than this from the agent
+    # and the target moved less than retarget_m, as a PointNav goal does in training. 0 = a new point along
+    # the route every step: on a route longer than subgoal_m the point then slides ahead of the agent and
+    # every slide over retarget_m restarts the policy's memory
+    waypoint_keep_m: float = 0.0
     # learned: within stop_distance_m + this of a goal point the geometric navigator takes over (its final
     # approach and settle rule). The policy learned to reach a floor point within 0.36 m with its own STOP;
     # a goal point on an object, reached at 0.9 m with that STOP masked, is another task. 0 = never
@@ -113,9 +118,10 @@ class NavigatorConfig:
                 raise ValueError(f"navigator.checkpoint = {self.checkpoint!r} is not a policy file; fix: "
                                  "--agent-arg navigator.checkpoint=PATH to the policy.pt of `ovon train --task "
                                  "pointnav` (or its run folder)")
-        if self.subgoal_m < 0 or self.handover_m < 0:
-            raise ValueError(f"navigator.subgoal_m = {self.subgoal_m!r} and navigator.handover_m = "
-                             f"{self.handover_m!r} must be >= 0")
+        if self.subgoal_m < 0 or self.handover_m < 0 or self.waypoint_keep_m < 0:
+            raise ValueError(f"navigator.subgoal_m = {self.subgoal_m!r}, navigator.handover_m = "
+                             f"{self.handover_m!r} and navigator.waypoint_keep_m = {self.waypoint_keep_m!r} "
+                             "must be >= 0")
         if self.goal_ring_bins < 1:
             raise ValueError(f"navigator.goal_ring_bins = {self.goal_ring_bins!r} must be >= 1")
         if self.stuck_steps < 0:

@@ -85,7 +85,8 @@ class LearnedNavigator:
         self.state = self.policy.init_state(1, "cpu")
         self.prev = torch.full((1,), -1, dtype=torch.long)
         self.first = True
-        self.target: tuple[float, float] | None = None
+        self.target: tuple[float, float] | None = None  # the point the policy heads for
+        self.aim: tuple[float, float] | None = None  # the request's target when `target` was chosen
         self.kind = ""
         self.recent: deque[tuple[float, float, bool]] = deque(maxlen=max(1, self.cfg.stuck_steps))  # (x, z, bumped)
         self.rescue = 0  # steps the geometric navigator still drives after the policy got stuck
@@ -135,6 +136,13 @@ class LearnedNavigator:
         t = self.subgoal(request)
         if t is None:
             return None
+        keep = self.cfg.waypoint_keep_m
+        if (keep > 0 and self.target is not None and request.kind == self.kind and self.aim is not None
+                and math.dist(request.target, self.aim) <= self.cfg.retarget_m
+                and math.hypot(self.target[0] - request.pose.x, self.target[1] - request.pose.z) > keep):
+            t = self.target
+        else:
+            self.aim = (float(request.target[0]), float(request.target[1]))
         if self.target is None or request.kind != self.kind or math.dist(t, self.target) > self.cfg.retarget_m:
             self.state = self.policy.init_state(1, "cpu")
             self.prev = torch.full((1,), -1, dtype=torch.long)
