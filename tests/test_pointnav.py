@@ -425,6 +425,41 @@ def test_learned_navigator_keeps_its_route_point_while_it_is_far(tiny_policy: Pa
         _learned(tiny_policy, waypoint_keep_m=-1.0)
 
 
+def test_learned_navigator_never_walks_where_its_map_is_blocked_with_map_checked_forward(tiny_policy: Path) -> None:
+    """A policy that always wants MOVE_FORWARD, facing a wall on its map with the frontier behind it: with
+    `map_checked_forward` (the default) the geometric navigator takes over for `stuck_steps` steps (its
+    detour) and the policy restarts afterwards; without it the forward is taken (into the wall)."""
+    from ovon.agents.modular.navigation import NavRequest
+    from ovon.agents.modular.sensors import Pose2D
+    from ovon.sim.agent import MOVE_FORWARD
+
+    def forward_loving(nav):
+        act_step = nav.policy.act_step
+
+        def wrapped(*args, **kwargs):
+            logits, value, state = act_step(*args, **kwargs)
+            logits = logits.clone()
+            logits[:, MOVE_FORWARD] += 50.0
+            return logits, value, state
+
+        nav.policy.act_step = wrapped
+        return nav
+
+    obs = {"depth": np.full((64, 36), 2.0, np.float32), "collided": 0}
+    xs = np.linspace(-1.0, 1.0, 60)
+    for checked in (False, True):
+        nav, maps = _learned(tiny_policy, map_checked_forward=checked, handover_m=0.0)
+        forward_loving(nav)
+        maps.add_obstacle_points(np.stack([xs, np.full_like(xs, -0.35)], 1))  # a wall 0.35 m ahead (-z)
+        pose = Pose2D(0.0, 0.0, 0.0)
+        assert maps.navigable[maps.cell(0.0, 0.0)] and not nav.planner.steering.free(pose.position, pose.yaw)
+        action = nav.act(obs, NavRequest(pose, (0.0, -4.0), "frontier", maps))
+        if checked:
+            assert action != MOVE_FORWARD and nav.rescue == nav.cfg.stuck_steps - 1 and nav.target is None
+        else:
+            assert action == MOVE_FORWARD and nav.rescue == 0
+
+
 def test_learned_navigator_hands_the_final_approach_and_getting_unstuck_to_the_geometric_one(
     tiny_policy: Path,
 ) -> None:

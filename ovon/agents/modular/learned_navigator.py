@@ -32,7 +32,7 @@ from ovon.agents.modular.config import NavigatorConfig
 from ovon.agents.modular.maps import AgentMaps
 from ovon.agents.modular.navigation import GeometricNavigator, NavRequest
 from ovon.agents.modular.sensors import Sensors
-from ovon.sim.agent import STOP
+from ovon.sim.agent import MOVE_FORWARD, STOP
 from ovon.task.pointgoal import goal_vector
 
 
@@ -165,4 +165,10 @@ class LearnedNavigator:
             action = int(torch.multinomial(torch.softmax(logits.float(), -1), 1, generator=self.gen).item())
         self.prev = torch.tensor([action])
         self.first = False
+        if (action == MOVE_FORWARD and self.cfg.map_checked_forward and self.planner.on_map(request.pose)
+                and not self.planner.steering.free(request.pose.position, request.pose.yaw)):
+            # as when stuck: the geometric navigator drives `stuck_steps` steps (its detour, then the route)
+            self.rescue, self.target = max(0, self.cfg.stuck_steps - 1), None
+            self.recent.clear()
+            return self.planner.act(observation, request)
         return action

@@ -163,6 +163,10 @@ class GeometricNavigator:
         i = int(np.argmin((rr + r0 - r) ** 2 + (cc + c0 - c) ** 2))
         return int(rr[i] + r0), int(cc[i] + c0), False
 
+    def on_map(self, pose: Pose2D) -> bool:
+        """Whether the agent stands on a cell its map holds navigable (or off the map's bounds)."""
+        return self._start_cell(pose)[2]
+
     def plan(self, pose: Pose2D, tr: np.ndarray, tc: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """Shortest path (rows, cols) from the agent to the cheapest target, or None."""
         m = self.maps
