@@ -229,3 +229,31 @@ def test_kill_9_during_train_then_resume_gives_the_same_losses(tmp_path):
     b = torch.load(ref / "policy.pt", weights_only=True)["state_dict"]
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
     assert not (out / ".lock").exists()
+
+
+def test_sigterm_stops_train_cleanly_and_the_same_command_resumes(tmp_path):
+    """SIGTERM (kill, `timeout`, a cluster scheduler) stops `ovon train` as Ctrl-C does: exit 130 with the
+    one-line hint, env workers shut down, no shared memory left behind (Python's resource tracker would warn
+    of leaked segments), the run lock released; the same command with `--resume` then finishes it."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "ovon.cli.main", "train", "--algo", "dagger", "--preset", "tiny",
+           "--expert", "shortest-path", "--procedural", "0-1", "--episodes", "6", "--resume",
+           "--set", "max_updates=40", "--set", "env_workers=2", "--set", f"text_cache={tmp_path / 'text.pt'}",
+           "--out", str(out)]
+    env = {**_env(), "OMP_NUM_THREADS": "1"}
+    p = subprocess.Popen(cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 600
+    while p.poll() is None and checkpoints_on_disk(out) < 1 and time.time() < deadline:
+        time.sleep(0.02)
+    workers = [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
+                                              text=True).stdout.split()]
+    assert p.poll() is None and workers, "the run should be mid-way, with its env workers"
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    assert "interrupted (re-run the same command to resume)" in err
+    assert "leaked" not in err and "Traceback" not in err, err
+    assert _wait_gone(workers) == []
+    assert not (out / ".lock").exists()
+    res = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=1200)
+    assert res.returncode == 0, res.stderr

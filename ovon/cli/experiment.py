@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 from pathlib import Path
 
 
@@ -69,19 +68,11 @@ def cmd_list(args) -> int:
     return 0
 
 
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
-
-
 def cmd_run(args) -> int:
     from ovon.experiments import parse_shard, run
 
     plan = _plan(args, args.scale)
     shard = parse_shard(args.shard)
-    try:
-        signal.signal(signal.SIGTERM, _interrupt)  # a terminated runner stops its cell's command first
-    except ValueError:  # not the main thread
-        pass
     try:
         result = run(plan, only=_csv(args.only) or None, shard=shard, redo_cells=_csv(args.redo),
                      dry_run=args.dry_run, wait=not args.no_wait, write_report=not args.no_report)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 import warnings
 
@@ -57,9 +58,28 @@ def expected_errors() -> tuple[type[BaseException], ...]:
     return errors + ((remote.RemoteError,) if remote is not None else ())
 
 
+def _terminated(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    # SIGTERM (kill, cluster schedulers, `timeout`) stops a command as Ctrl-C does: its env workers are shut
+    # down and their shared memory freed, and the same command resumes it. The default action would kill
+    # this process alone and leave the shared memory behind
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminated)
+    except ValueError:  # not the main thread: leave signals alone
+        previous = None
+    try:
+        return _run(args)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args: argparse.Namespace) -> int:
     debug = bool(os.environ.get("OVON_DEBUG"))
     with warnings.catch_warnings():
         if not debug:
