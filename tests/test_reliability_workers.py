@@ -231,23 +231,30 @@ def test_kill_9_during_train_then_resume_gives_the_same_losses(tmp_path):
     assert not (out / ".lock").exists()
 
 
-def test_sigterm_stops_train_cleanly_and_the_same_command_resumes(tmp_path):
+@pytest.mark.parametrize("group", [False, True], ids=["process", "process-group"])
+def test_sigterm_stops_train_cleanly_and_the_same_command_resumes(tmp_path, group):
     """SIGTERM (kill, `timeout`, a cluster scheduler) stops `ovon train` as Ctrl-C does: exit 130 with the
     one-line hint, env workers shut down, no shared memory left behind (Python's resource tracker would warn
-    of leaked segments), the run lock released; the same command with `--resume` then finishes it."""
+    of leaked segments), the run lock released; the same command with `--resume` then finishes it. To the
+    process alone, and to its whole process group (workers included) followed by a second SIGTERM to the
+    process, as `timeout` and then the experiment runner send them."""
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "ovon.cli.main", "train", "--algo", "dagger", "--preset", "tiny",
            "--expert", "shortest-path", "--procedural", "0-1", "--episodes", "6", "--resume",
            "--set", "max_updates=40", "--set", "env_workers=2", "--set", f"text_cache={tmp_path / 'text.pt'}",
            "--out", str(out)]
     env = {**_env(), "OMP_NUM_THREADS": "1"}
-    p = subprocess.Popen(cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                         start_new_session=group)
     deadline = time.time() + 600
     while p.poll() is None and checkpoints_on_disk(out) < 1 and time.time() < deadline:
         time.sleep(0.02)
     workers = [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
                                               text=True).stdout.split()]
     assert p.poll() is None and workers, "the run should be mid-way, with its env workers"
+    if group:
+        os.killpg(p.pid, signal.SIGTERM)
+        time.sleep(0.05)
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err

@@ -59,6 +59,9 @@ def expected_errors() -> tuple[type[BaseException], ...]:
 
 
 def _terminated(signum, frame) -> None:
+    # once: a second SIGTERM (a process group's stop, then the experiment runner's own) must not cut the
+    # clean-up that the first one started
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     raise KeyboardInterrupt
 
 

@@ -9,6 +9,7 @@ same episode without an env.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,9 +25,10 @@ from ovon.task.goals import distractors, goal_instances, points_near_objects
 from ovon.task.tracker import EpisodeTracker
 
 _ADHOC = LRU(CACHE_SIZE)  # (grid uids, goal object ids) -> (grid, points, viewpoints), as many as distance fields
-# (a grid uid of the world, goal categories) -> the scene's distractors, shared read-only: a training env
-# resets to the same few goal sets thousands of times and rebuilding the list cost ~0.05 ms per PPO step.
-_DISTRACTORS = LRU(CACHE_SIZE)
+# world -> {goal categories: the scene's distractors}, shared read-only: a training env resets to the same few
+# goal sets thousands of times and rebuilding the list cost ~0.05 ms per PPO step. Keyed by the world itself
+# (weakly), not by its grids: worlds of the same geometry share grids but may hold other objects.
+_DISTRACTORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass
@@ -80,12 +82,19 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
 
         coverage = Coverage(grid, task.reward.coverage_fov_deg or fov_deg, task.reward.coverage_range_m)
     tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=goal_ids, cfg=task,
-                             distractors=_DISTRACTORS.get((grid.uid, tuple(sorted(set(spec.goal_categories)))),
-                                                          lambda: distractors(world.scene, spec.goal_categories)),
+                             distractors=_world_distractors(world, spec.goal_categories),
                              coverage=coverage,
                              object_distance_fn=lambda p: object_floor_distance(on_floor, p))
     state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
     return EpisodeSetup(state, grid, field, list(viewpoints), goal_ids, tracker)
+
+
+def _world_distractors(world: World, goal_categories: list[str]) -> list:
+    per_world = _DISTRACTORS.setdefault(world, {})
+    key = tuple(sorted(set(goal_categories)))
+    if key not in per_world:
+        per_world[key] = distractors(world.scene, goal_categories)
+    return per_world[key]
 
 
 def _adhoc_viewpoints(world: World, grids: list, objs: list, goal: str) -> tuple:

@@ -98,10 +98,10 @@ class NavigatorConfig:
     waypoint_keep_m: float = 0.0
     # learned: when the policy picks a MOVE_FORWARD that the agent's map says is blocked (the agent standing
     # on a cell the map holds navigable), the geometric navigator drives the next `stuck_steps` steps (its
-    # detour, then the route). Without it the policy drove through gaps that the map's inflated obstacles
-    # close, and in the pocket behind such a gap the map held no route to any frontier: VLFM then turned
-    # in place until the step limit. Masking the forward, or handing over that one step only, left the
-    # policy alternating left and right turns in front of the blocked cell
+    # detour, then the route; with stuck_steps 0 only that step). Without it the policy drove through gaps
+    # that the map's inflated obstacles close, and in the pocket behind such a gap the map held no route to
+    # any frontier: VLFM then turned in place until the step limit. Masking the forward, or handing over
+    # that one step only, left the policy alternating left and right turns in front of the blocked cell
     map_checked_forward: bool = True
     # learned: within stop_distance_m + this of a goal point the geometric navigator takes over (its final
     # approach and settle rule). The policy learned to reach a floor point within 0.36 m with its own STOP;
