@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _run(args)
     finally:
-        if previous is not None:
+        # after a SIGTERM it stays ignored until the process exits (a late second one would kill it mid-exit)
+        if previous is not None and signal.getsignal(signal.SIGTERM) is _terminated:
             signal.signal(signal.SIGTERM, previous)
 
 
