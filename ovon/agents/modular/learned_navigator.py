@@ -115,24 +115,25 @@ class LearnedNavigator:
         k = int(np.searchsorted(along, self.subgoal_m, side="right")) - 1
         return self.maps.cell_centre(int(pr[k]), int(pc[k]))
 
+    def _geometric(self, observation: dict, request: NavRequest, then: int) -> int | None:
+        """The geometric navigator takes this step and the `then` steps after it; the policy restarts with a
+        fresh memory afterwards."""
+        self.rescue, self.target = then, None
+        self.recent.clear()
+        return self.planner.act(observation, request)
+
     @torch.no_grad()
     def act(self, observation: dict, request: NavRequest) -> int | None:
         if request.kind == "goal" and request.rho < self.cfg.stop_distance_m + self.cfg.handover_m:
-            if self.cfg.handover_m > 0:
-                # the policy starts afresh should the agent leave the final approach
-                self.target, self.rescue = None, 0
-                self.recent.clear()
-                return self.planner.act(observation, request)
+            if self.cfg.handover_m > 0:  # the policy starts afresh should the agent leave the final approach
+                return self._geometric(observation, request, then=0)
             if request.rho < self.cfg.stop_distance_m:
                 return STOP
         bumped = bool(observation.get("collided", 0))
         if self.rescue == 0 and self.stuck(request, bumped):
-            self.rescue = self.cfg.stuck_steps
-            self.recent.clear()
+            return self._geometric(observation, request, then=self.cfg.stuck_steps - 1)
         if self.rescue > 0:
-            self.rescue -= 1
-            self.target = None
-            return self.planner.act(observation, request)
+            return self._geometric(observation, request, then=self.rescue - 1)
         t = self.subgoal(request)
         if t is None:
             return None
@@ -168,7 +169,5 @@ class LearnedNavigator:
         if (action == MOVE_FORWARD and self.cfg.map_checked_forward and self.planner.on_map(request.pose)
                 and not self.planner.steering.free(request.pose.position, request.pose.yaw)):
             # as when stuck: the geometric navigator drives `stuck_steps` steps (its detour, then the route)
-            self.rescue, self.target = max(0, self.cfg.stuck_steps - 1), None
-            self.recent.clear()
-            return self.planner.act(observation, request)
+            return self._geometric(observation, request, then=max(0, self.cfg.stuck_steps - 1))
         return action
