@@ -232,37 +232,53 @@ def test_kill_9_during_train_then_resume_gives_the_same_losses(tmp_path):
 
 
 @pytest.mark.parametrize("group", [False, True], ids=["process", "process-group"])
-def test_sigterm_stops_train_cleanly_and_the_same_command_resumes(tmp_path, group):
-    """SIGTERM (kill, `timeout`, a cluster scheduler) stops `ovon train` as Ctrl-C does: exit 130 with the
-    one-line hint, env workers shut down, no shared memory left behind (Python's resource tracker would warn
-    of leaked segments), the run lock released; the same command with `--resume` then finishes it. To the
-    process alone, and to its whole process group (workers included) followed by more SIGTERMs to the process
-    until it exits (`timeout`, then the experiment runner's own stop)."""
-    out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "ovon.cli.main", "train", "--algo", "dagger", "--preset", "tiny",
-           "--expert", "shortest-path", "--procedural", "0-1", "--episodes", "6", "--resume",
-           "--set", "max_updates=40", "--set", "env_workers=2", "--set", f"text_cache={tmp_path / 'text.pt'}",
-           "--out", str(out)]
+def test_sigterm_stops_train_after_its_update_with_a_checkpoint_and_the_same_command_resumes(tmp_path, group):
+    """SIGTERM (kill, `timeout`, a cluster scheduler) stops `ovon train` as Ctrl-C does: the current update
+    finishes and is checkpointed although no checkpoint is scheduled, then exit 130 with the one-line hint,
+    env workers shut down, no shared memory left behind (Python's resource tracker would warn of leaked
+    segments), the run lock released; the same command with `--resume` then finishes it, to the weights of
+    an uninterrupted run. To the process alone, and to its whole process group (workers included) followed
+    by more SIGTERMs to the process until it exits (`timeout`, then the experiment runner's own stop)."""
+    import torch
+
+    from ovon.train.checkpoint import load_checkpoint
+    from ovon.train.logging import read_metrics
+
+    def cmd(out: Path) -> list[str]:
+        return [sys.executable, "-m", "ovon.cli.main", "train", "--algo", "dagger", "--preset", "tiny",
+                "--expert", "shortest-path", "--procedural", "0-1", "--episodes", "6", "--resume",
+                "--set", "max_updates=40", "--set", "checkpoint_every=1000", "--set", "env_workers=2",
+                "--set", f"text_cache={tmp_path / 'text.pt'}", "--out", str(out)]
+
     env = {**_env(), "OMP_NUM_THREADS": "1"}
-    p = subprocess.Popen(cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    out, ref = tmp_path / "run", tmp_path / "ref"
+    p = subprocess.Popen(cmd(out), env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                          start_new_session=group)
     deadline = time.time() + 600
-    while p.poll() is None and checkpoints_on_disk(out) < 1 and time.time() < deadline:
+    while p.poll() is None and len(read_metrics(out)) < 2 and time.time() < deadline:
         time.sleep(0.02)
     workers = [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
                                               text=True).stdout.split()]
     assert p.poll() is None and workers, "the run should be mid-way, with its env workers"
+    assert not (out / "checkpoint.pt").exists(), "no checkpoint is scheduled before the last update"
     if group:
         os.killpg(p.pid, signal.SIGTERM)
-        while p.poll() is None:  # more SIGTERMs all through the clean-up and the exit: all ignored
+        while p.poll() is None:  # more SIGTERMs all through the update, the checkpoint and the exit: all ignored
             p.send_signal(signal.SIGTERM)
             time.sleep(0.02)
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err
+    assert "stopping after this update, with a checkpoint" in err
     assert "interrupted (re-run the same command to resume)" in err
     assert "leaked" not in err and "Traceback" not in err, err
     assert _wait_gone(workers) == []
     assert not (out / ".lock").exists()
-    res = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=1200)
-    assert res.returncode == 0, res.stderr
+    stopped_at = load_checkpoint(out)["update"]
+    assert 2 <= stopped_at < 40 and read_metrics(out)[-1]["update"] == stopped_at
+    for folder in (out, ref):
+        res = subprocess.run(cmd(folder), env=env, cwd=ROOT, capture_output=True, text=True, timeout=1200)
+        assert res.returncode == 0, res.stderr
+    a = torch.load(out / "policy.pt", weights_only=True)["state_dict"]
+    b = torch.load(ref / "policy.pt", weights_only=True)["state_dict"]
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)

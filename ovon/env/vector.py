@@ -20,6 +20,7 @@ Workers run single-threaded (`ovon.parallel.init_worker`) and die with their par
 from __future__ import annotations
 
 import multiprocessing as mp
+import signal
 import traceback
 from collections.abc import Callable, Sequence
 from multiprocessing import shared_memory
@@ -133,6 +134,10 @@ def _worker(conn, fns: Sequence[EnvFn], first: int) -> None:
     from ovon.parallel import init_worker
 
     init_worker()
+    # Ctrl-C and a process group's SIGTERM reach the workers too: the parent decides when they stop (a
+    # training run finishes its update and checkpoints first), and they die with it (`init_worker`)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
     segments, host = [], None
     try:
         host = _Host(fns, first, {})

@@ -94,11 +94,15 @@ def child_env() -> dict[str, str]:
     return env
 
 
+# A stopped training child finishes its update and writes a checkpoint of it before it exits
+STOP_GRACE_S = 120.0
+
+
 def _stop(proc: subprocess.Popen) -> None:
     if proc.poll() is None:
         proc.terminate()
         try:
-            proc.wait(timeout=15)
+            proc.wait(timeout=STOP_GRACE_S)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()

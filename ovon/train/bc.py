@@ -250,8 +250,9 @@ def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | P
             if run.due(update + 1, total, cfg.log_every):
                 last = {**scalars, "epoch": float(epoch), "time/update_s": time.perf_counter() - t0}
                 run.log(update + 1, last)
-            if run.due(update + 1, total, cfg.checkpoint_every):
+            if run.checkpoint_due(update + 1, total):
                 run.save(update + 1, optimizer, {})
+                run.stop_if_requested()
         run.finish(total)
     finally:
         run.close()

@@ -129,7 +129,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
             run.step += n_envs * T * run.info.world_size
             record = {"beta": beta, "finished": finished, "rollout_s": t1 - t0, "step": run.step}
             # ---- learn: now, or (overlap) in the thread while the next rollout runs ---------------------
-            checkpoint = run.due(update + 1, total, cfg.checkpoint_every)
+            checkpoint = run.checkpoint_due(update + 1, total)
             if overlap:
                 if pending is not None:
                     u, future, rec = pending
@@ -155,6 +155,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 if overlap:
                     state |= {"actor": actor.state_dict(), "learn_rng": learn_rng.get_state()}
                 run.save(update + 1, optimizer, state)
+                run.stop_if_requested()
         if pending is not None:  # (the last update always checkpoints; kept for clarity)
             u, future, rec = pending
             rec["wall_s"] = time.perf_counter() - t_prev

@@ -59,7 +59,9 @@ def setup(device: str = "auto") -> DistInfo:
     if dev.type == "cuda":
         torch.cuda.set_device(dev)
     if not dist.is_initialized():
-        dist.init_process_group("nccl" if dev.type == "cuda" else "gloo")
+        # GPU ranks: nccl for the model's CUDA tensors, gloo for the CPU scalars of logging and stop requests
+        # (nccl alone refuses a CPU tensor)
+        dist.init_process_group("cpu:gloo,cuda:nccl" if dev.type == "cuda" else "gloo")
     return DistInfo(rank, world, local, dev)
 
 

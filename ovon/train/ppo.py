@@ -207,8 +207,9 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 last = {**scalars, **episode_summary(eps),
                         "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
                 run.log(update + 1, last)
-            if run.due(update + 1, total, cfg.checkpoint_every):
+            if run.checkpoint_due(update + 1, total):
                 run.save(update + 1, optimizer, {**collector.state(), "actor_gate_open": gate_open})
+                run.stop_if_requested()
         run.finish(total)
     finally:
         run.close()

@@ -24,6 +24,7 @@ from ovon.train.checkpoint import export_policy, load_checkpoint, rng_state, sav
 from ovon.train.checkpoint import set_rng_state as _set_rng_state
 from ovon.train.config import TrainConfig
 from ovon.train.logging import RunLogger
+from ovon.train.stop import StopRequest
 
 
 class TrainRun:
@@ -51,6 +52,8 @@ class TrainRun:
         self.envs = None
         self.logger: RunLogger | None = None
         self.start_update, self.step = 0, 0
+        self.stop = StopRequest()
+        self.stopping = False
 
     @property
     def is_main(self) -> bool:
@@ -146,6 +149,9 @@ class TrainRun:
         _set_rng_state(state["rng"])
 
     def open_logger(self, total: int, description: str | None = None) -> RunLogger:
+        """Called as the update loop starts: from here on the first Ctrl-C / SIGTERM is a stop request
+        that the loop honours at the end of its update (`checkpoint_due`, `stop_if_requested`)."""
+        self.stop.arm()
         self.logger = RunLogger(self.out, total, description or self.algo, self.is_main, self.cfg.progress,
                                 self.start_update, self.step)
         return self.logger
@@ -173,6 +179,20 @@ class TrainRun:
         """Whether update `update` (1-based) is a logging / checkpoint point."""
         return update % every == 0 or update == total
 
+    def checkpoint_due(self, update: int, total: int) -> bool:
+        """Whether update `update` (1-based) ends with a checkpoint: a scheduled one, or a stop request
+        on any rank (a collective: under torchrun every rank must call it on every update)."""
+        stop = self.stop.requested
+        if self.info.enabled:
+            stop = dist.all_reduce_sum(float(stop), self.info) > 0
+        self.stopping = stop
+        return stop or self.due(update, total, self.cfg.checkpoint_every)
+
+    def stop_if_requested(self) -> None:
+        """After `save`: a requested stop ends the run here as an interrupt (the same command resumes)."""
+        if self.stopping:
+            raise KeyboardInterrupt
+
     def finish(self, update: int) -> None:
         """Per-rank parameter checksum (DDP ranks must agree; the torchrun test reads it)."""
         d = self.out / "ranks"
@@ -182,6 +202,7 @@ class TrainRun:
              "checksum": param_checksum(self.policy)}))
 
     def close(self) -> None:
+        self.stop.disarm()
         if self.logger is not None:
             self.logger.close()
         if self.envs is not None:
