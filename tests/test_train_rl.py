@@ -18,7 +18,7 @@ from ovon.train.collect import explained_variance, gae  # noqa: E402
 from ovon.train.config import FinetuneConfig, train_preset  # noqa: E402
 from ovon.train.episodes import adhoc_specs  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
-from ovon.train.ppo import anchor_weight, kl_to  # noqa: E402
+from ovon.train.ppo import anchor_weight, kl_to, reference_logits  # noqa: E402
 from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 
 
@@ -104,6 +104,40 @@ def test_kl_to() -> None:
     a = torch.randn(3, 5, 4)
     assert kl_to(a, a).item() == pytest.approx(0.0, abs=1e-7)
     assert kl_to(a, torch.zeros_like(a)).item() > 0
+
+
+def test_lstm_reference_carries_its_own_memory_from_chunk_to_chunk() -> None:
+    """The KL anchor's reference LSTM, read chunk by chunk with its own carried (h, c), gives the logits of
+    one pass over the whole rollout; read with the fine-tuned policy's memory (what the anchor did before)
+    it gives other logits from the second chunk on."""
+    from ovon.models.config import policy_preset
+    from ovon.models.policy import build_policy
+
+    torch.manual_seed(0)
+    reference = build_policy(policy_preset("tiny", core="lstm"), 24, 16).eval()
+    tuned = build_policy(policy_preset("tiny", core="lstm"), 24, 16).eval()  # other weights
+    g = torch.Generator().manual_seed(3)
+    B, T, chunks = 3, 8, 3
+    n = chunks * T + 1  # + the bootstrap observation
+    img, goal = torch.randn(B, n, 24, generator=g), torch.randn(B, n, 16, generator=g)
+    prev = torch.randint(0, 6, (B, n), generator=g)
+    starts = torch.rand(B, n, generator=g) < 0.1
+    starts[:, 0] = True
+    prev[starts] = -1
+    with torch.no_grad():
+        whole = reference.forward_seq(reference.make_obs(img, goal), prev, starts)[0]
+        ref_state = tuned_state = None
+        for c in range(chunks):
+            sl = slice(c * T, c * T + T + 1)
+            logits, ref_state = reference_logits(reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0,
+                                                 T, ref_state)
+            torch.testing.assert_close(logits, whole[:, c * T:(c + 1) * T], rtol=1e-5, atol=1e-5)
+            wrong, _ = reference_logits(reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0, T,
+                                        tuned_state)
+            if c > 0:
+                assert (wrong - logits).abs().max() > 1e-3
+            tuned_state = tuned.forward_seq(tuned.make_obs(img[:, sl][:, :T], goal[:, sl][:, :T]), prev[:, sl][:, :T],
+                                            starts[:, sl][:, :T], tuned_state)[2]
 
 
 @pytest.mark.parametrize("anchor", ["kl", "expert"])

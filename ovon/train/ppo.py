@@ -69,6 +69,19 @@ def kl_to(ref_logits: torch.Tensor, logits: torch.Tensor) -> torch.Tensor:
     return (ref.exp() * (ref - torch.log_softmax(logits, -1))).sum(-1).mean()
 
 
+def reference_logits(reference, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, start_seq: torch.Tensor,
+                     prefix: int, steps: int, state) -> tuple[torch.Tensor, object]:
+    """The frozen initial policy's logits on the chunk's `steps` steps after `prefix` context steps, and its
+    memory after them. An LSTM reference needs its own (h, c) carried from chunk to chunk: the policy's
+    acting state is what the *fine-tuned* LSTM remembers, and read by the reference it gives logits that
+    drift away from the initial policy's (an anchor to something neither policy would do). A transformer
+    keeps no state (None): the prefix is its memory."""
+    n = prefix + steps  # the bootstrap observation after the chunk is the next chunk's first step
+    obs = reference.make_obs(features(reference, map_images(img, lambda x: x[:, :n])), goal_seq[:, :n])
+    logits, _, state = reference.forward_seq(obs, prev_seq[:, :n], start_seq[:, :n], state)
+    return logits[:, prefix:], state
+
+
 def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
               init: str | None = None) -> dict:
     """Run PPO (from scratch, or fine-tuning `init`); returns the last logged metrics."""
@@ -106,10 +119,12 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
         prefix = policy.cfg.layers * (policy.cfg.context - 1) if transformer else 0
         collector = RolloutCollector(envs, batch, policy, dev, prefix=prefix)
         gate_open = ft.critic_warmup_ev <= 0  # the explained-variance gate of the actor (latched)
+        ref_state = None  # the reference LSTM's memory at the next chunk's start
         saved = run.restore(optimizer)
         if saved is not None:
             collector.restore(saved)
             gate_open = saved.get("actor_gate_open", gate_open)
+            ref_state = saved.get("ref_state")
             run.restore_rng(saved)
         total = num_updates(cfg, run.info.world_size)
         run.open_logger(total)
@@ -146,9 +161,9 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 log_ratio = old_logp - ro.behaviour_logp.to(dev)  # update vs acting, same weights
                 behaviour_kl = (log_ratio.exp() - 1 - log_ratio).mean().item()
                 ref_logits = None
-                if reference is not None:
-                    ref_obs = reference.make_obs(features(reference, img), goal_seq)
-                    ref_logits = reference.forward_seq(ref_obs, prev_seq, start_seq, state0)[0][:, P:P + T]
+                if reference is not None:  # its memory at the first chunk is the policy's: they are equal
+                    ref_logits, ref_state = reference_logits(reference, img, goal_seq, prev_seq, start_seq, P, T,
+                                                             state0 if ref_state is None else ref_state)
             if not gate_open and ev >= ft.critic_warmup_ev:
                 gate_open = True
             labels = ro.labels[:, :T].to(dev)
@@ -208,7 +223,8 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                         "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
                 run.log(update + 1, last)
             if run.checkpoint_due(update + 1, total):
-                run.save(update + 1, optimizer, {**collector.state(), "actor_gate_open": gate_open})
+                run.save(update + 1, optimizer, {**collector.state(), "actor_gate_open": gate_open,
+                                                 "ref_state": ref_state})
                 run.stop_if_requested()
         run.finish(total)
     finally:
