@@ -350,18 +350,18 @@ def test_imitation_loss_weights_stop_and_ignores_unlabelled() -> None:
 
 
 def test_evaluate_uses_the_camera_a_policy_was_trained_with(tmp_path) -> None:
-    from ovon.cli.evaluate import trained_camera
+    from ovon.cli.evaluate import checkpoint_facts
     from ovon.models.config import EncoderConfig, policy_preset
     from ovon.models.policy import build_policy
 
     policy = build_policy(policy_preset("tiny"), 8, 4, EncoderConfig())
     policy.save(tmp_path / "policy.pt", extra={"camera": {"width": 96, "height": 72, "hfov_deg": 42.0,
                                                            "backend": "gl", "not_a_field": 1}})
-    assert trained_camera(str(tmp_path)) == {"width": 96, "height": 72, "hfov_deg": 42.0}
+    assert checkpoint_facts(str(tmp_path), "objectnav") == {"width": 96, "height": 72, "hfov_deg": 42.0}
     policy.save(tmp_path / "bare.pt")
-    assert trained_camera(str(tmp_path / "bare.pt")) == {}
+    assert checkpoint_facts(str(tmp_path / "bare.pt"), "objectnav") == {}
     with pytest.raises(FileNotFoundError, match="missing.pt"):
-        trained_camera(str(tmp_path / "missing.pt"))
+        checkpoint_facts(str(tmp_path / "missing.pt"), "objectnav")
 
 
 def test_expert_config_reaches_the_labelling_expert() -> None:

@@ -35,7 +35,7 @@ class PolicyAgent:
         path = Path(checkpoint)
         if path.is_dir():
             path = path / "policy.pt"
-        self.policy = ActorCritic.load(path, map_location=device).eval()
+        self.policy = ActorCritic.load(path, map_location=device, flag="checkpoint").eval()
         self.device = torch.device(device)
         self.deterministic = deterministic
         if temperature <= 0:

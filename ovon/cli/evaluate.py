@@ -101,27 +101,23 @@ def _agent_kwargs(items: list[str], checkpoint: str | None) -> dict:
     return kwargs
 
 
-def trained_camera(checkpoint: str) -> dict:
+def checkpoint_facts(checkpoint: str, task: str) -> dict:
     """Camera fields a policy checkpoint was trained with ({} when it does not say): a policy sees the
-    world through the resolution it learned on unless the user asks otherwise."""
-    import torch
-
+    world through the resolution it learned on unless the user asks otherwise. Refuses, before any work, a
+    file that is not a policy and a policy of the other task (`task`: the --task being evaluated)."""
     from ovon.config.base import ConfigError
     from ovon.config.sim import CameraConfig
+    from ovon.models.policy import policy_task_kind, read_policy_file
 
-    path = Path(checkpoint)
-    path = path / "policy.pt" if path.is_dir() else path
-    fix = "fix: pass the policy.pt written by `ovon train` (or its run folder)"
-    if not path.is_file():
-        raise FileNotFoundError(f"--checkpoint {str(checkpoint)!r}: {path} does not exist; {fix}")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001 - torch raises many types for a bad file
-        detail = " ".join(str(e).split())[:120]
-        raise ConfigError(f"--checkpoint {str(checkpoint)!r}: not a checkpoint torch can read ({type(e).__name__}: "
-                          f"{detail}); {fix}") from None
-    if not isinstance(ckpt, dict):
-        raise ConfigError(f"--checkpoint {str(checkpoint)!r}: holds a {type(ckpt).__name__}, not a policy; {fix}")
+    ckpt = read_policy_file(checkpoint, "--checkpoint")
+    kind = policy_task_kind(ckpt)
+    if kind is not None and kind != task:
+        fix = ("evaluate it with --task pointnav (point goals in procedural houses), or use it as VLFM's "
+               "navigator: --agent vlfm --agent-arg navigator=learned --agent-arg navigator.checkpoint=PATH"
+               if kind == "pointnav" else "leave --task pointnav out")
+        name = {"objectnav": "an ObjectNav", "pointnav": "a PointNav"}
+        raise ConfigError(f"--checkpoint {checkpoint!r} is {name.get(kind, kind)} policy, this is "
+                          f"{name.get(task, task)} evaluation; fix: {fix}")
     extra = ckpt.get("extra", {}) or {}
     camera = extra.get("camera") if isinstance(extra, dict) else None
     fields = {f.name for f in dataclasses.fields(CameraConfig)}
@@ -147,10 +143,11 @@ def eval_config(args) -> EvalConfig:
         "name": args.name,
         "strict": args.strict,
     })
+    checkpoint = cfg.agent_kwargs.get("checkpoint") if args.agent in ("policy", "dagrl-od") else None
+    camera = checkpoint_facts(str(checkpoint), "objectnav") if checkpoint else {}
     if args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
-    elif args.preset == "auto" and args.agent in ("policy", "dagrl-od") and cfg.agent_kwargs.get("checkpoint"):
-        camera = trained_camera(str(cfg.agent_kwargs["checkpoint"]))
+    elif args.preset == "auto" and checkpoint:
         if camera:
             cfg = with_camera(cfg, camera)
             print(f"camera of the checkpoint: {camera.get('width')}x{camera.get('height')} (--preset cpu|paper "
@@ -174,11 +171,11 @@ def pointnav_config(args) -> EvalConfig:
     cfg = from_dict(EvalConfig, {**pointnav_defaults(), **data})
     check_source(cfg)
     ckpt = kwargs.get("checkpoint")
+    camera = checkpoint_facts(str(ckpt), "pointnav") if ckpt else {}
     cfg = dataclasses.replace(cfg, task=checkpoint_task(str(ckpt) if ckpt else None))
     if args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
     elif args.preset == "auto" and ckpt:
-        camera = trained_camera(str(ckpt))
         if camera:
             cfg = with_camera(cfg, camera)
     elif args.preset == "cpu":

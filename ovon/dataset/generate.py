@@ -66,6 +66,16 @@ def discover_scenes(scenes_dir: str | Path) -> list[SceneRef]:
     return refs
 
 
+def preflight_scenes(refs: list[SceneRef]) -> None:
+    """Cheap checks of every scene's files before any generation work (`preflight_scene`: containers and
+    lengths, node transforms, semantic.txt, extent), so a truncated or broken scene fails the command at
+    once with one line naming its file, not after hours spent on the scenes listed before it."""
+    from ovon.scenes.hm3dsem.load import preflight_scene
+
+    for ref in refs:
+        preflight_scene(ref.folder)
+
+
 def scene_categories(ref: SceneRef) -> set[str]:
     """Canonical categories annotated in a scene, from its semantic.txt (cheap: no mesh loading)."""
     from ovon.scenes.hm3dsem import find_scene_files, parse_semantic_txt
@@ -384,6 +394,8 @@ def generate(
             raise EmptyGenerationError(f"{scenes_dir} has no {kind} scenes (expected {Path(scenes_dir) / kind}/"
                                        f"<NNNNN-id>/) for the split(s) {need}; fix: add scene folders there or "
                                        "leave those splits out (--split)")
+    active = [r for r in refs if r.kind in kinds]
+    preflight_scenes(active)
     cats_by_scene = {r.stem: scene_categories(r) for r in refs}
     cat_path = Path(category_split_path) if category_split_path else out / "categories.json"
     if cat_path.exists():
@@ -409,7 +421,6 @@ def generate(
     atomic_write_text(out / "generation_config.json", json.dumps(to_dict(cfg), indent=2, sort_keys=True))
     report = GenerationReport(scenes=len(refs))
     cfg_d = to_dict(cfg)
-    active = [r for r in refs if r.kind in kinds]
     wanted = sorted(set().union(*(split_cats[s] for s in splits)))
 
     # phase 1: goals

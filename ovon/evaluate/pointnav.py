@@ -51,15 +51,11 @@ def checkpoint_task(checkpoint: str | None) -> TaskConfig:
     from ovon.config.task import pointnav_task
 
     if checkpoint:
-        import torch
+        from ovon.models.policy import policy_task_kind, read_policy_file
 
-        path = Path(checkpoint)
-        path = path / "policy.pt" if path.is_dir() else path
-        if path.is_file():
-            extra = torch.load(path, map_location="cpu", weights_only=True).get("extra") or {}
-            task = extra.get("task")
-            if task:
-                return dataclasses.replace(from_dict(TaskConfig, task), failed_stop_ends=True)
+        ckpt = read_policy_file(checkpoint, "--checkpoint")
+        if policy_task_kind(ckpt) == "pointnav":
+            return dataclasses.replace(from_dict(TaskConfig, ckpt["extra"]["task"]), failed_stop_ends=True)
     return pointnav_task()
 
 

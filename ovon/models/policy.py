@@ -232,11 +232,10 @@ class ActorCritic(nn.Module):
         atomic_write_with(path, lambda f: torch.save(payload, f))
 
     @classmethod
-    def load(cls, path: str | Path, map_location: str | torch.device = "cpu") -> ActorCritic:
-        """Rebuild a policy saved by `save` (any core)."""
-        ckpt = torch.load(Path(path), map_location=map_location, weights_only=True)
-        if ckpt.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path} is not an ovon policy checkpoint ({CHECKPOINT_FORMAT})")
+    def load(cls, path: str | Path, map_location: str | torch.device = "cpu", flag: str = "policy") -> ActorCritic:
+        """Rebuild a policy saved by `save` (any core); `path` may be its run folder. A file that is not
+        one is refused in one line naming `flag` (`read_policy_file`)."""
+        ckpt = read_policy_file(path, flag, map_location)
         cfg = from_dict(PolicyConfig, ckpt["policy_config"])
         enc = ckpt.get("encoder_config")
         enc_cfg = None if enc is None else from_dict(EncoderConfig, enc)
@@ -270,6 +269,43 @@ def build_policy(
     """`TransformerPolicy` or `LSTMPolicy` according to `policy_cfg.core`."""
     cls = TransformerPolicy if policy_cfg.core == "transformer" else LSTMPolicy
     return cls(policy_cfg, image_dim, text_dim, encoder_cfg)
+
+
+def read_policy_file(path: str | Path, flag: str = "policy", map_location: str | torch.device = "cpu") -> dict:
+    """The dict of a policy.pt written by `ActorCritic.save` (a run folder means its policy.pt), read with
+    weights_only. Anything else - a missing, empty, truncated or foreign file, a training run's
+    checkpoint.pt - is one line naming `flag`, the path and the fix, never torch's own multi-line text."""
+    given = Path(path)
+    p = given / "policy.pt" if given.is_dir() else given
+    fix = "fix: pass the policy.pt written by `ovon train` (or its run folder)"
+    where = f"{flag} {str(path)!r}"
+    if not p.is_file():
+        raise FileNotFoundError(f"{where}: {p} does not exist; {fix}")
+    if p.stat().st_size == 0:
+        raise ValueError(f"{where}: {p} is empty; {fix}")
+    resume_state = (f"{where}: {p} is a training run's resume state, not a policy; fix: pass "
+                    f"{p.parent / 'policy.pt'}")
+    try:
+        ckpt = torch.load(p, map_location=map_location, weights_only=True)
+    except Exception as e:  # noqa: BLE001 - torch raises many types (unpickling, zip, EOF) for a bad file
+        if p.name == "checkpoint.pt":
+            raise ValueError(resume_state) from None
+        raise ValueError(f"{where}: {p} is not a checkpoint torch can read ({type(e).__name__}: truncated, or not "
+                         f"written by torch.save); {fix}") from None
+    if isinstance(ckpt, dict) and {"optimizer", "ranks"} <= ckpt.keys():
+        raise ValueError(resume_state)
+    if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
+        what = f"format {ckpt.get('format')!r}" if isinstance(ckpt, dict) else f"a {type(ckpt).__name__}"
+        raise ValueError(f"{where}: {p} is not an ovon policy ({CHECKPOINT_FORMAT}; it holds {what}); {fix}")
+    return ckpt
+
+
+def policy_task_kind(ckpt: dict) -> str | None:
+    """The task ("objectnav" | "pointnav") a policy dict of `read_policy_file` was trained for; None when
+    it does not say (written before policies recorded their task)."""
+    task = (ckpt.get("extra") or {}).get("task") if isinstance(ckpt.get("extra"), dict) else None
+    kind = task.get("kind") if isinstance(task, dict) else None
+    return kind if isinstance(kind, str) else None
 
 
 def load_policy(path: str | Path, map_location: str | torch.device = "cpu") -> ActorCritic:

@@ -27,6 +27,10 @@ def train(cfg: TrainConfig, specs: Sequence[EpisodeSpec] | EpisodeSource | None,
         raise ValueError(f"unknown algorithm {cfg.algo!r}; valid: bc, dagger, ppo")
     if cfg.algo != "bc" and not episodes:
         raise ValueError(f"{cfg.algo} needs episodes (--data/--scenes or --procedural)")
+    if init:  # a wrong --init is refused before the run folder is made (it would block the fixed command)
+        from ovon.train.run import load_init_policy
+
+        load_init_policy(init, cfg.encoder, cfg.task.kind)
     folder = open_run_folder(cfg, out_dir, config_keys, inputs, resume, init)
     try:
         return _run(cfg, episodes, out_dir, resume, init)

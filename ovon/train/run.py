@@ -43,7 +43,7 @@ class TrainRun:
         self.out.mkdir(parents=True, exist_ok=True)
         self.algo = algo
         self.resume_requested = resume
-        self.init_policy = load_init_policy(init, cfg.encoder) if init else None
+        self.init_policy = load_init_policy(init, cfg.encoder, cfg.task.kind) if init else None
         if self.init_policy is not None:
             cfg = dataclasses.replace(cfg, policy=self.init_policy.cfg,
                                       encoder=self.init_policy.encoder_cfg or cfg.encoder)
@@ -215,19 +215,19 @@ def expert_config(cfg: TrainConfig) -> Any:
     return cfg.frontier_expert if cfg.expert == "frontier" else cfg.shortest_path_expert
 
 
-def load_init_policy(path: str | Path, encoder_cfg):
-    """The IL policy to fine-tune: a `policy.pt`, or a run folder holding one."""
+def load_init_policy(path: str | Path, encoder_cfg, task_kind: str | None = None):
+    """The IL policy to fine-tune: a `policy.pt`, or a run folder holding one; refused in one line when it
+    is not a policy, or was trained with another image encoder or for another task."""
     from ovon.models.policy import ActorCritic
 
-    path = Path(path)
-    if path.is_dir():
-        path = path / "policy.pt"
-    if not path.is_file():
-        raise FileNotFoundError(f"--init {path} does not exist; pass a policy.pt written by ovon train or its folder")
-    policy = ActorCritic.load(path)
+    policy = ActorCritic.load(path, flag="--init")
     if policy.encoder_cfg is not None and policy.encoder_cfg.image != encoder_cfg.image:
-        raise ValueError(f"--init {path} was trained with encoder {policy.encoder_cfg.image!r}, "
+        raise ValueError(f"--init {str(path)!r} was trained with encoder {policy.encoder_cfg.image!r}, "
                          f"not {encoder_cfg.image!r}")
+    trained_for = ((policy.checkpoint_extra or {}).get("task") or {}).get("kind")
+    if task_kind is not None and trained_for is not None and trained_for != task_kind:
+        raise ValueError(f"--init {str(path)!r} is a {trained_for} policy, this run trains {task_kind}; fix: pass "
+                         f"a policy trained with --task {task_kind}")
     return policy
 
 

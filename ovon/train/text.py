@@ -39,8 +39,10 @@ def text_table(cfg: EncoderConfig, texts: Sequence[str], cache_path: str | Path,
     path = Path(cache_path)
     table: dict[str, torch.Tensor] = {}
     if path.is_file():
-        data = torch.load(path, weights_only=True)
-        if data.get("key") == key or data.get("key") is None:
+        data = _read_cache(path, warn=write)
+        if data is None and not write:
+            raise ValueError(f"text cache {path} is unreadable; fix: delete it (rank 0 rebuilds it)")
+        if data is not None and (data.get("key") == key or data.get("key") is None):
             table = dict(data["table"])
     missing = [t for t in dict.fromkeys(texts) if t not in table]
     if missing:
@@ -51,6 +53,24 @@ def text_table(cfg: EncoderConfig, texts: Sequence[str], cache_path: str | Path,
         if write:
             atomic_torch_save({"key": key, "table": table}, path)
     return table
+
+
+def _read_cache(path: Path, warn: bool = True) -> dict | None:
+    """The cache's dict, or None (with a warning) when it is torn or not a text cache: it only holds
+    embeddings that the text encoder recomputes, so it is rebuilt instead of stopping the run."""
+    import warnings
+
+    try:
+        data = torch.load(path, weights_only=True)
+    except Exception as e:  # noqa: BLE001 - torch raises many types for a torn file
+        data, why = None, type(e).__name__
+    else:
+        ok = isinstance(data, dict) and isinstance(data.get("table"), dict)
+        why = "" if ok else f"holds a {type(data).__name__} without a table"
+        data = data if ok else None
+    if data is None and warn:
+        warnings.warn(f"text cache {path} is unreadable ({why}); its embeddings are recomputed", stacklevel=3)
+    return data
 
 
 def write_text_table(path: str | Path, table: dict[str, Any], cfg: EncoderConfig | None = None) -> Path:

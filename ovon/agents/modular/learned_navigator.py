@@ -42,7 +42,7 @@ def load_pointnav_policy(checkpoint: str):
 
     path = Path(checkpoint)
     path = path / "policy.pt" if path.is_dir() else path
-    policy = ActorCritic.load(path).eval()
+    policy = ActorCritic.load(path, flag="navigator.checkpoint").eval()
     extra = getattr(policy, "checkpoint_extra", {}) or {}
     if (extra.get("task") or {}).get("kind") != "pointnav":
         raise ValueError(

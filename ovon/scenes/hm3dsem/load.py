@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ovon.scenes.hm3dsem.combine import _combine, _decode_face_ids, _semantic_face_colors
-from ovon.scenes.hm3dsem.errors import SceneLoadWarning
+from ovon.scenes.hm3dsem.errors import SceneFileError, SceneLoadWarning, lfs_pointer_error
 from ovon.scenes.hm3dsem.files import find_scene_files
 from ovon.scenes.hm3dsem.geometry import _faces_by_instance, detect_floors, yaw_obb
 from ovon.scenes.hm3dsem.mesh_formats import read_mesh_primitives
@@ -34,6 +34,112 @@ from ovon.scenes.hm3dsem.semantic_txt import (
 from ovon.scenes.hm3dsem.sidecar import read_sidecar
 from ovon.scenes.hm3dsem.upaxis import configured_up, frame_rotation, parse_up, rotate_mesh, rotation_warning
 from ovon.scenes.model import Mesh, ObjectInstance, Region, Scene
+
+# Widest horizontal extent (x or z, metres, habitat frame) a scene may have. No building scanned for
+# embodied AI comes near it (HM3D's largest span tens of metres; even a very large mall or factory floor
+# stays within a few hundred), while a house exported in millimetres or centimetres goes far beyond it
+# (a 4 m room in mm spans 4000 m). Without the check such a mesh loads "fine" and then asks for a
+# navigation grid of billions of cells (reported as out of memory) or a scene 1000x too big for the agent.
+MAX_SCENE_SPAN_M = 500.0
+
+Notes = list[tuple[Path, str]]  # (file the note is about, what it says): warnings name the file
+
+
+def check_scene_span(mesh: Mesh, path: Path) -> None:
+    """Refuse a mesh wider than MAX_SCENE_SPAN_M horizontally (habitat frame, y up), naming `path`:
+    mesh units other than metres, or stray vertices far from the rest (see MAX_SCENE_SPAN_M)."""
+    v = mesh.vertices
+    if v.size == 0:
+        return
+    span = np.array([float(v[:, k].max()) - float(v[:, k].min()) for k in (0, 2)])  # column views: no copy
+    if span.max() <= MAX_SCENE_SPAN_M:
+        return
+    xz = v[:, [0, 2]].astype(np.float64)
+    core_lo, core_hi = np.percentile(xz, [0.5, 99.5], axis=0)
+    core = core_hi - core_lo
+    if core.max() <= MAX_SCENE_SPAN_M / 2:
+        far = np.abs(xz - (core_lo + core_hi) / 2).max(axis=1) > MAX_SCENE_SPAN_M / 2
+        i = int(np.flatnonzero(far)[0])
+        raise SceneFileError(
+            path,
+            f"spans {span[0]:,.0f} x {span[1]:,.0f} m horizontally (max {MAX_SCENE_SPAN_M:g} m), but 99% of its "
+            f"vertices lie within {core[0]:,.1f} x {core[1]:,.1f} m: {int(far.sum()):,} stray vertices lie far away "
+            f"(e.g. vertex {i} at {np.round(mesh.vertices[i].astype(np.float64), 1).tolist()})",
+            "fix: delete the stray geometry from the mesh",
+        )
+    raise _span_error(path, span)
+
+
+def _span_error(path: Path, span: np.ndarray) -> SceneFileError:
+    hints = "; ".join(f"read as {unit}: {span[0] / k:,.1f} x {span[1] / k:,.1f} m"
+                      for unit, k in (("mm", 1000.0), ("cm", 100.0)) if span.max() / k <= MAX_SCENE_SPAN_M)
+    return SceneFileError(
+        path,
+        f"spans {span[0]:,.0f} x {span[1]:,.0f} m horizontally (x by z), more than any building (max "
+        f"{MAX_SCENE_SPAN_M:g} m): are its units millimetres or centimetres?{f' ({hints})' if hints else ''}",
+        "fix: scale the mesh to metres (x0.001 from mm, x0.01 from cm) and re-export it",
+    )
+
+
+def preflight_scene(path: str | Path, up: str | None = None) -> dict[str, Any]:
+    """Cheap checks of one scene's files, for a command about to spend minutes or hours on many scenes
+    (`ovon dataset generate`): a broken file is found before any work instead of after the scenes before
+    it were processed. Reads no vertex data: glTF containers, buffer / accessor lengths, index types and
+    node transforms (`preflight_gltf`), the extent from the POSITION bounds when they are exact, PLY / OBJ
+    headers only (not empty, not a Git LFS pointer), the semantic.txt and sidecar in full (small).
+
+    Raises what `load_scene` would raise for the same problem (SceneFileError / FileNotFoundError, one
+    line naming the file); returns the scene's files (`find_scene_files`). A scene that passes can still
+    fail to load on what only its vertex data shows (NaN positions, indices out of range, and the extent
+    when the POSITION bounds are missing or node transforms rotate off the axes)."""
+    from ovon.scenes.hm3dsem.glb_read import preflight_gltf
+
+    files = find_scene_files(path)
+    bounds = None
+    for key in ("visual", "semantic"):
+        mesh_path: Path | None = files[key]
+        if mesh_path is None:
+            continue
+        if mesh_path.suffix.lower() in (".glb", ".gltf"):
+            b = preflight_gltf(mesh_path)
+            bounds = b if key == "visual" else bounds
+        else:
+            with open(mesh_path, "rb") as f:
+                head = f.read(200)
+            err = lfs_pointer_error(mesh_path, head)
+            if err is not None:
+                raise err
+            if not head.strip():
+                raise SceneFileError(mesh_path, "is empty (not a mesh)")
+    if files["sidecar"] is not None:
+        read_sidecar(files["sidecar"])
+    if files["sidecar"] is not None or (files["semantic_txt"] is None) != (files["semantic"] is None):
+        _require_annotations(files)  # our scenes need both annotation files, a scan both or neither
+    if files["semantic_txt"] is not None:
+        parse_semantic_txt(files["semantic_txt"])
+    if bounds is not None:
+        rot = np.eye(3)
+        if files["sidecar"] is None:
+            if up is not None:
+                rot = frame_rotation(*parse_up(up))
+            else:
+                conf = configured_up(files["stage_config"], files["dataset_config"])
+                rot = frame_rotation(conf[0], conf[1]) if conf else np.eye(3)
+        lo, hi = bounds
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        c = corners @ rot.T
+        span = (c.max(axis=0) - c.min(axis=0))[[0, 2]]
+        if _axis_aligned_rotation(rot) and span.max() > MAX_SCENE_SPAN_M:
+            # the declared bounds say too wide: confirm on the vertices (bounds can be stale, and only the
+            # vertices tell wrong units from stray geometry); rare, so reading the mesh here costs little
+            mesh, _ = _visual_mesh(files["visual"])
+            check_scene_span(rotate_mesh(mesh, rot), files["visual"])
+    return files
+
+
+def _axis_aligned_rotation(rot: np.ndarray) -> bool:
+    """The rotation permutes axes (habitat's up-axis conversions do), so a rotated box stays exact."""
+    return bool((np.count_nonzero(np.abs(rot) > 1e-9, axis=1) == 1).all())
 
 
 def load_scene(path: str | Path, vocab: Any = None, up: str | None = None) -> Scene:
@@ -55,8 +161,8 @@ def load_scene(path: str | Path, vocab: Any = None, up: str | None = None) -> Sc
         scene, notes = _load_ours(files, vocab)
     else:
         scene, notes = _load_scan(files, vocab, up)
-    for n in notes:
-        warnings.warn(f"{files['folder']}: {n}", SceneLoadWarning, stacklevel=2)
+    for where, n in notes:
+        warnings.warn(f"{where}: {n}", SceneLoadWarning, stacklevel=2)
     return scene
 
 
@@ -74,11 +180,12 @@ def _require_annotations(files: dict) -> None:
         raise FileNotFoundError(f"scene {stem}: semantic mesh {folder / (stem + '.semantic.glb')} is missing")
 
 
-def _load_ours(files: dict, vocab: Any) -> tuple[Scene, list[str]]:
+def _load_ours(files: dict, vocab: Any) -> tuple[Scene, Notes]:
     side = read_sidecar(files["sidecar"])
     _require_annotations(files)
     entries = parse_semantic_txt(files["semantic_txt"])
     mesh, notes = _visual_mesh(files["visual"])
+    check_scene_span(mesh, files["visual"])
     if mesh.vertex_colors is not None:
         if side.get("visual_colors") == "face":
             mesh.vertex_colors = None
@@ -116,14 +223,15 @@ def _load_ours(files: dict, vocab: Any) -> tuple[Scene, list[str]]:
             region_id=e.region_id, region_name=so.get("region_name", ""), floor=int(so.get("floor", 0)), color=e.color,
         ))  # fmt: skip
     regions_side = {int(r["id"]): r for r in side.get("regions", [])}
-    notes += _objects_from_faces(scene, geom, from_faces, vocab, regions_side)
+    notes += _objects_from_faces(scene, geom, from_faces, vocab, regions_side, files["semantic_txt"])
     order = {e.id: i for i, e in enumerate(entries)}
     scene.objects.sort(key=lambda o: order[o.id])
     if mismatched:
-        notes.append(
+        notes.append((
+            files["sidecar"],
             f"{len(mismatched)} objects clean to a different category than the sidecar records "
-            f"(vocabulary changed?), e.g. {mismatched[:3]}; the cleaned one is used"
-        )
+            f"(vocabulary changed?), e.g. {mismatched[:3]}; the cleaned one is used",
+        ))
     scene.regions = [
         Region(int(r["id"]), r["name"], int(r["floor"]), None if r["bounds"] is None else tuple(r["bounds"]))
         for r in side.get("regions", [])
@@ -134,7 +242,7 @@ def _load_ours(files: dict, vocab: Any) -> tuple[Scene, list[str]]:
 # ------------------------------------------------------------------------- real scans, any mesh
 
 
-def _load_scan(files: dict, vocab: Any, up: str | None) -> tuple[Scene, list[str]]:
+def _load_scan(files: dict, vocab: Any, up: str | None) -> tuple[Scene, Notes]:
     folder, stem = files["folder"], files["stem"]
     mesh, notes = _visual_mesh(files["visual"])
     frame_note = ""
@@ -147,9 +255,10 @@ def _load_scan(files: dict, vocab: Any, up: str | None) -> tuple[Scene, list[str
         frame_note = f"up axis {conf[0].round(3).tolist()} from {conf[2]}" if conf else ""
     rot = frame_rotation(u, f)
     rotate_mesh(mesh, rot)
+    check_scene_span(mesh, files["visual"])
     why = rotation_warning(mesh)
     if why:
-        notes.append(why + (f" ({frame_note})" if frame_note else ""))
+        notes.append((files["visual"], why + (f" ({frame_note})" if frame_note else "")))
     has_txt, has_sem = files["semantic_txt"] is not None, files["semantic"] is not None
     if has_txt != has_sem:
         _require_annotations(files)  # one of the two is missing: name it
@@ -171,7 +280,7 @@ def _load_scan(files: dict, vocab: Any, up: str | None) -> tuple[Scene, list[str
     semantic_mesh, geom, n2 = _semantic(files, entries, mesh, rot)
     notes += n2
     scene.semantic_mesh = semantic_mesh
-    notes += _objects_from_faces(scene, geom, entries, vocab, {})
+    notes += _objects_from_faces(scene, geom, entries, vocab, {}, files["semantic_txt"])
     scene.regions = _regions_from_objects(scene)
     return scene, notes
 
@@ -179,31 +288,34 @@ def _load_scan(files: dict, vocab: Any, up: str | None) -> tuple[Scene, list[str
 # ------------------------------------------------------------------------------------ shared steps
 
 
-def _visual_mesh(path: Path) -> tuple[Mesh, list[str]]:
+def _visual_mesh(path: Path) -> tuple[Mesh, Notes]:
     prims, notes = read_mesh_primitives(path)
     mesh, n2 = _combine(prims, "visual", path)
-    return mesh, notes + n2
+    return mesh, [(path, n) for n in notes + n2]
 
 
 def _semantic(
     files: dict, entries: list[SemanticEntry], mesh: Mesh, rot: np.ndarray
-) -> tuple[Mesh | None, Mesh, list[str]]:
+) -> tuple[Mesh | None, Mesh, Notes]:
     """(separate semantic mesh or None when it has the visual mesh's triangles, the mesh carrying ids,
     notes). Ids come from the semantic mesh's colours through semantic.txt."""
-    sem_prims, notes = read_mesh_primitives(files["semantic"])
+    sem_prims, read_notes = read_mesh_primitives(files["semantic"])
+    notes: Notes = [(files["semantic"], n) for n in read_notes]
     if not sem_prims:
         raise ValueError(f"{files['semantic']}: the semantic mesh has no triangles")
     color_to_id = {e.color: e.id for e in entries}
     face_rgb, _how = _semantic_face_colors(sem_prims)
     face_ids, unknown, missing = _decode_face_ids(face_rgb, color_to_id)
     if unknown:
-        notes.append(
+        notes.append((
+            files["semantic"],
             f"{unknown} semantic faces have colours missing from {files['semantic_txt'].name} "
-            f"({len(missing)} colours, e.g. {sorted(_hex(c) for c in missing)[:5]}); assigned id 0"
-        )
+            f"({len(missing)} colours, e.g. {sorted(_hex(c) for c in missing)[:5]}); assigned id 0",
+        ))
     sem_mesh, n4 = _combine(sem_prims, "semantic", files["semantic"])
-    notes += n4
+    notes += [(files["semantic"], n) for n in n4]
     rotate_mesh(sem_mesh, rot)
+    check_scene_span(sem_mesh, files["semantic"])
     sem_mesh.face_instance = face_ids.astype(np.int32)
     same = (
         sem_mesh.texture is None  # painted textures stay a separate mesh: renderers sample them per pixel
@@ -228,8 +340,8 @@ def _semantic(
 
 
 def _objects_from_faces(
-    scene: Scene, geom: Mesh, entries: list[SemanticEntry], vocab: Any, regions_side: dict
-) -> list[str]:
+    scene: Scene, geom: Mesh, entries: list[SemanticEntry], vocab: Any, regions_side: dict, txt: Path
+) -> Notes:
     """Append an object per entry with its boxes computed from its faces; entries without faces are skipped."""
     groups = _faces_by_instance(np.asarray(geom.face_instance))
     no_faces: list[int] = []
@@ -248,7 +360,8 @@ def _objects_from_faces(
             region_id=e.region_id, region_name=rname, floor=scene.floor_of_height(float(lo[1])), color=e.color,
         ))  # fmt: skip
     if no_faces:
-        return [f"{len(no_faces)} annotated instances have no faces and were skipped (ids {no_faces[:10]})"]
+        return [(txt, f"{len(no_faces)} annotated instances have no faces in the semantic mesh and were skipped "
+                      f"(ids {no_faces[:10]})")]
     return []
 
 
