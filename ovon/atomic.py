@@ -17,6 +17,46 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 
+def check_output_path(path: str | Path, what: str = "--out", *, folder: bool = False, expected: str = "",
+                      example: str = "", suffixes: tuple[str, ...] = (), writable: bool = True,
+                      error: type[ValueError] = ValueError) -> Path:
+    """Refuse an output path that cannot be written, before any work: one line naming the option, the
+    path, why, and the fix. Why here: every writer of the project goes through this module, and a
+    command that renders or trains first would otherwise fail at its very end (`f/x.png` with `f` a file).
+
+    Refused: an empty or blank path ("" is the current folder: files would be scattered there); a path under an
+    existing file; `folder=True`: an existing file; `folder=False`: an existing folder, or a name not
+    ending with one of `suffixes`; `writable`: a folder to create (or write in) that this process cannot
+    write (False for a folder only read now, e.g. a run root that a dry run or a report reads).
+    `expected` / `example` describe a file path for messages (e.g. "the path of a .png file",
+    "frame.png"); `error`: the exception class raised (a subclass of ValueError). Returns `Path(path)`."""
+    text = str(path)
+    noun = "folder" if folder else "file"
+    shown = expected or f"the path of a {noun}"
+    if not text.strip():
+        hint = example or ("runs/NAME" if folder else "PATH")
+        why = "'' would write into the current folder" if not text else f"{text!r} is blank"
+        raise error(f"{what} is empty ({why}); expected {shown}; fix: pass {what} {hint}")
+    p = Path(text)
+    existing = next((a for a in (p, *p.parents) if os.path.lexists(a)), Path("."))
+    if existing != p and not existing.is_dir():
+        raise error(f"{what} {text}: {existing} is an existing file, not a folder, so nothing can be written "
+                    f"under it; fix: choose another {what} (or move {existing} away)")
+    if existing == p and folder and not p.is_dir():
+        raise error(f"{what} {text} is an existing file, not a folder; fix: choose a folder path (it is created "
+                    "when absent)")
+    if existing == p and not folder and p.is_dir():
+        raise error(f"{what} {text!r} is a folder; expected {shown}; fix: e.g. {what} {p / (example or 'out')}")
+    if suffixes and not folder and not p.name.lower().endswith(tuple(s.lower() for s in suffixes)):
+        raise error(f"{what} {text!r}: expected {shown} (a name ending with {' or '.join(suffixes)}); fix: e.g. "
+                    f"{what} {p.with_name(p.stem + suffixes[0])}")
+    into = existing if existing.is_dir() else existing.parent
+    if writable and not os.access(into, os.W_OK | os.X_OK):
+        raise error(f"{what} {text}: cannot write in {into} (permission denied); fix: choose a {noun} you "
+                    "can write")
+    return p
+
+
 def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], Any]) -> Path:
     """Call `write(f)` on a temp file in the target folder, fsync, then `os.replace` it into place.
 

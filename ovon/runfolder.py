@@ -4,7 +4,8 @@ Why: a resumable command (`evaluate`, `dataset generate`, `train --resume`) trus
 its output folder. Re-running it with another agent, seed or `task.max_steps` used to mix two runs in one
 folder, and two processes on one folder wrote every record twice. A `RunFolder`:
 
-- refuses `--out` naming an existing file;
+- refuses an `--out` that cannot be a run folder (empty, an existing file, under a file), see
+  `ovon.atomic.check_output_path`;
 - writes `run_identity.json` (the kind of run, its resolved config, the identities of what it read:
   dataset content hash, scenes root, checkpoint hash) when the folder is created;
 - on a later open compares them and refuses a mismatch with ONE message naming every differing key
@@ -32,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ovon.atomic import write_json
+from ovon.atomic import check_output_path, write_json
 
 IDENTITY_FILE = "run_identity.json"
 LOCK_FILE = ".lock"
@@ -278,11 +279,9 @@ class RunFolder:
         `may_change`: dotted key prefixes (of `config`, or `inputs.<key>`) not compared on resume.
         `markers`: file names that show run data from before identities existed (refused when found
         without an identity). `what`: how the user named the folder, for messages."""
-        path = Path(path)
+        # "" (the current folder), an existing file, a path under a file, a folder that cannot be written
+        path = check_output_path(path, what, folder=True, error=RunFolderError)
         created = not path.exists()
-        if path.exists() and not path.is_dir():
-            raise RunFolderError(f"{what} {path} is an existing file, not a run folder; fix: choose a folder "
-                                 "path (it is created when absent)")
         try:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as e:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from ovon.atomic import check_output_path
 from ovon.config.base import (
     ExistingPath,
     OneOf,
@@ -117,6 +118,7 @@ def cmd_generate(args) -> int:
     from ovon.dataset.generate import generate
 
     a = from_args(GenerateArgs, args, split=tuple(args.split) if args.split else None)
+    check_output_path(args.out, "--out", folder=True)  # "" would write the dataset into the current folder
     cfg = generation_config(args)
     rep = generate(a.scenes, args.out, cfg, splits=a.split, workers=a.workers, executor=a.executor,
                    progress=not args.no_progress, category_split_path=a.categories or None)
@@ -140,9 +142,8 @@ def cmd_splits(args) -> int:
     if args.vocabulary == bool(a.scenes):
         raise ConfigError("ovon dataset splits: give exactly one of --scenes DIR or --vocabulary; fix: e.g. "
                           "ovon dataset splits --vocabulary --out categories.json")
-    if Path(a.out).is_dir():
-        raise ConfigError(f"--out {a.out!r} is a folder; expected the path of categories.json; fix: e.g. "
-                          f"--out {Path(a.out) / 'categories.json'}")
+    check_output_path(a.out, "--out", expected="the path of categories.json", example="categories.json",
+                      error=ConfigError)
     if args.vocabulary:
         from ovon.scenes.vocabulary import load_vocabulary
 

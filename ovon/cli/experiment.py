@@ -41,15 +41,32 @@ def _common(p) -> None:
 
 
 def _experiments(name: str) -> list:
-    from ovon.experiments import experiment_names, load_experiment
+    """The experiments NAME names (once each). No name at all ("" or ",") is refused: an empty plan would
+    still prepare the data and report success."""
+    from ovon.experiments import DefinitionError, experiment_names, load_experiment
 
     names = experiment_names() if name == "all" else [n.strip() for n in name.split(",") if n.strip()]
-    return [load_experiment(n) for n in names]
+    if not names:
+        raise DefinitionError(f"experiment name {name!r} names no experiment; expected one of "
+                              f"{', '.join(experiment_names())}, a comma-separated list, all, or the path of an "
+                              "experiment .yaml; fix: name one, e.g. main")
+    return [load_experiment(n) for n in dict.fromkeys(names)]
+
+
+def _check_root(root: str, writable: bool = False) -> Path:
+    """--root is a folder: "" (the current folder), a file or a path under a file are refused here, before
+    the plan is resolved (a file would otherwise read as unreadable cell records). `writable`: it is
+    written now (a run; a dry run or a report only reads it)."""
+    from ovon.atomic import check_output_path
+    from ovon.experiments import DefinitionError
+
+    return check_output_path(root, "--root", folder=True, writable=writable, error=DefinitionError)
 
 
 def _plan(args, scale: str):
     from ovon.experiments import resolve
 
+    _check_root(args.root, writable=getattr(args, "experiment_command", "") == "run" and not args.dry_run)
     return resolve(_experiments(args.name), scale, args.root, args.set)
 
 
@@ -70,11 +87,14 @@ def cmd_list(args) -> int:
 
 def cmd_run(args) -> int:
     from ovon.experiments import parse_shard, run
+    from ovon.experiments.select import match_cells
 
     plan = _plan(args, args.scale)
     shard = parse_shard(args.shard)
+    redo = _csv(args.redo)
+    match_cells(plan, redo, flag="--redo")  # an unknown --redo cell, named as --redo, before any work
     try:
-        result = run(plan, only=_csv(args.only) or None, shard=shard, redo_cells=_csv(args.redo),
+        result = run(plan, only=_csv(args.only) or None, shard=shard, redo_cells=redo,
                      dry_run=args.dry_run, wait=not args.no_wait, write_report=not args.no_report)
     except KeyboardInterrupt:
         print("interrupted: re-run the same command to resume")
@@ -83,11 +103,13 @@ def cmd_run(args) -> int:
 
 
 def cmd_report(args) -> int:
+    from ovon.atomic import check_output_path
     from ovon.experiments import build_report
 
-    scale = args.scale or _only_scale(Path(args.root))
+    scale = args.scale or _only_scale(_check_root(args.root))
     plan = _plan(args, scale)
-    out = args.out or plan.base / "reports" / plan.names
+    out = check_output_path(args.out if args.out is not None else plan.base / "reports" / plan.names, "--out",
+                            folder=True)
     path = build_report(plan, out)
     print(f"report: {path}")
     return 0

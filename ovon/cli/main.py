@@ -2,18 +2,21 @@
 exposing `register(subparsers)`; handlers are `func(args) -> int`.
 
 Errors are one line on stderr (`ovon: error: ...`, exit 2): bad input is refused by the config domains,
-the agent check, the dataset readers and the run folder before any work. Warnings (skipped episodes,
-records set aside) are one line each (`ovon: warning: ...`). An exception nobody anticipated is still one
-line, marked as an internal error, with its traceback behind OVON_DEBUG=1."""
+the agent check, the dataset readers and the run folder before any work; an OSError naming a path (an
+output under an existing file, a missing or unreadable file) is one line naming that path. Warnings
+(skipped episodes, records set aside) are one line each (`ovon: warning: ...`). An exception nobody
+anticipated is still one line, marked as an internal error, with its traceback behind OVON_DEBUG=1."""
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import signal
 import sys
 import warnings
+from pathlib import Path
 
 GROUPS = ["scenes", "sim", "dataset", "evaluate", "serve", "train", "demo", "experiment"]
 
@@ -52,7 +55,7 @@ def expected_errors() -> tuple[type[BaseException], ...]:
     from ovon.config.base import ConfigError
     from ovon.parallel import WorkerDied
 
-    errors: tuple[type[BaseException], ...] = (ConfigError, ValueError, KeyError, FileNotFoundError,
+    errors: tuple[type[BaseException], ...] = (ConfigError, ValueError, KeyError, FileNotFoundError, FileExistsError,
                                                NotADirectoryError, IsADirectoryError, PermissionError, WorkerDied)
     remote = sys.modules.get("ovon_agent")  # a served agent that failed, hung or went away (its own line)
     return errors + ((remote.RemoteError,) if remote is not None else ())
@@ -83,38 +86,95 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
+# Options naming where a command writes. Given empty they would name the current folder (Path("") is
+# Path(".")) and a run's files would be scattered there: refused for every command, before its own checks
+# (a library function given Path("") cannot tell it from an intended ".").
+OUTPUT_OPTIONS = {"out": "--out", "root": "--root"}
+
+
+def check_output_options(args: argparse.Namespace) -> None:
+    """Refuse an output option given as "" (or blanks), one line naming it."""
+    from ovon.atomic import check_output_path
+
+    for dest, flag in OUTPUT_OPTIONS.items():
+        value = getattr(args, dest, None)
+        if isinstance(value, str) and not value.strip():
+            check_output_path(value, flag, expected="a path", example="PATH")
+
+
 def _run(args: argparse.Namespace) -> int:
     debug = bool(os.environ.get("OVON_DEBUG"))
     with warnings.catch_warnings():
         if not debug:
             warnings.showwarning = _show_warning
         try:
+            check_output_options(args)
             return int(args.func(args) or 0)
         except KeyboardInterrupt:
             print("ovon: interrupted (re-run the same command to resume)", file=sys.stderr)
             return 130
-        except expected_errors() as e:
+        except MemoryError:
             if debug:
                 raise
-            msg = e.args[0] if isinstance(e, KeyError) and e.args else e
-            if isinstance(e, PermissionError | IsADirectoryError | NotADirectoryError) and e.filename:
-                msg = f"{e.filename}: {e.strerror}; fix: choose a path you can write / read"
-            print(f"ovon: error: {_one_line(msg)}", file=sys.stderr)
-            return 2
-        except MemoryError:
             print("ovon: error: out of memory; fix: smaller settings (e.g. --set sim.camera.width=160) or fewer "
                   "--workers", file=sys.stderr)
             return 2
-        except Exception as e:  # noqa: BLE001 - last resort: still one line, marked as a bug
+        except Exception as e:  # noqa: BLE001 - last resort: still one line, marked as a bug when it is one
             if debug:
                 raise
-            vector = sys.modules.get("ovon.env.vector")
-            if vector is not None and isinstance(e, getattr(vector, "WorkerError", ())):
-                print(f"ovon: error: {_one_line(e)}", file=sys.stderr)  # an env's own one-line error
+            line = user_error(e)
+            if line is not None:
+                print(f"ovon: error: {_one_line(line)}", file=sys.stderr)
                 return 2
             print(f"ovon: internal error: {type(e).__name__}: {_one_line(e)[:300]} (a bug in ovon: please report it; "
                   "OVON_DEBUG=1 shows the traceback)", file=sys.stderr)
             return 3
+
+
+def user_error(e: BaseException) -> str | None:
+    """The one-line message of an error caused by the command's input or its environment (a bad path, a
+    full disk), None for a bug. An OSError that names a path is the user's: the path is theirs."""
+    if isinstance(e, OSError) and e.filename:
+        return os_error_line(e)
+    if isinstance(e, OSError) and e.errno in (errno.ENOSPC, errno.EDQUOT):
+        return f"{e.strerror or e}; fix: free disk space (or choose an output folder on another disk)"
+    if isinstance(e, expected_errors()):
+        return e.args[0] if isinstance(e, KeyError) and e.args else str(e)
+    vector = sys.modules.get("ovon.env.vector")
+    if vector is not None and isinstance(e, getattr(vector, "WorkerError", ())):
+        return str(e)  # an env's own one-line error
+    return None
+
+
+def os_error_line(e: OSError) -> str:
+    """An OSError naming a path as one line: the path, what is wrong with it, the fix. The usual cause of
+    FileExistsError / NotADirectoryError is an output path under an existing file (`--out f/x.png` with
+    `f` a file): that file is named."""
+    path = os.fsdecode(e.filename)
+    blocker = _file_in_the_way(path) if isinstance(e, FileExistsError | NotADirectoryError) else None
+    if blocker is not None:
+        where = f"{path} is" if blocker == path else f"{path}: {blocker} is"
+        return f"{where} an existing file, not a folder; fix: choose another path (or move {blocker} away)"
+    why = e.strerror or type(e).__name__
+    other = f" -> {os.fsdecode(e.filename2)}" if e.filename2 else ""
+    if isinstance(e, FileNotFoundError):
+        fix = "check the path (and the folder the command runs in, for a relative path)"
+    elif isinstance(e, IsADirectoryError):
+        fix = "pass the path of a file, not of a folder"
+    elif isinstance(e, PermissionError):
+        fix = "choose a path you can write / read"
+    else:
+        fix = "check the path, or choose another one"
+    return f"{path}{other}: {why}; fix: {fix}"
+
+
+def _file_in_the_way(path: str) -> str | None:
+    """The path itself or the folder above it that exists and is not a folder, None when there is none."""
+    p = Path(path)
+    for a in (p, *p.parents):
+        if os.path.lexists(a):
+            return None if a.is_dir() else str(a)
+    return None
 
 
 if __name__ == "__main__":

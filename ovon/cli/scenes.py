@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ovon.atomic import check_output_path
+
 # House seeds: seed * SEED_STRIDE + split base + index, so the default seed gives HM3D-like five-digit
 # scene ids (train 00000.., val 80000..) and different dataset seeds never share a house.
 SEED_STRIDE = 100_000
@@ -80,6 +82,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     console = Console()
     if args.count < 0:
         raise ValueError(f"--count must be >= 0, got {args.count}")
+    check_output_path(args.out, "--out", folder=True)  # "" would scatter houses into the current folder
     split_dir = Path(args.out) / args.split
     split_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -174,6 +177,8 @@ def cmd_render_topdown(args: argparse.Namespace) -> int:
     from ovon.scenes.hm3dsem import load_scene
     from ovon.scenes.topdown import render_topdown
 
+    # checked before the scene is loaded and drawn
+    check_output_path(args.out, "--out", expected="the path of a .png file", example="topdown.png")
     out = render_topdown(load_scene(args.path, up=args.up), args.out, floor=args.floor)
     print(f"wrote {out}")
     return 0

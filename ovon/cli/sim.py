@@ -120,15 +120,15 @@ def colorize_semantic(semantic: np.ndarray, seed: int = 0) -> np.ndarray:
 def cmd_view(args) -> int:
     from PIL import Image
 
+    from ovon.atomic import atomic_write_with, check_output_path
     from ovon.config.base import ConfigError, from_args
     from ovon.config.sim import SimConfig
     from ovon.sim.render import make_renderer
     from ovon.sim.world import load_scene_any
 
     a = from_args(ViewArgs, args)
-    if Path(a.out).is_dir():
-        raise ConfigError(f"--out {a.out!r} is a folder; expected the path of a .png file; fix: e.g. "
-                          f"--out {Path(a.out) / 'frame.png'}")
+    # a folder, or a path under an existing file: refused before the scene is loaded and rendered
+    check_output_path(a.out, "--out", expected="the path of a .png file", example="frame.png", error=ConfigError)
     cam = _camera(args)
     scene = load_scene_any(args.scene, up=args.up)
     if a.pose is not None:
@@ -155,8 +155,7 @@ def cmd_view(args) -> int:
         [frame.rgb, colorize_depth(frame.depth, cam.max_depth), colorize_semantic(frame.semantic)], axis=1
     )
     out = Path(a.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(panel).save(out)
+    atomic_write_with(out, lambda f: Image.fromarray(panel).save(f, format="PNG"))  # never a torn PNG
     n_ids = len(np.unique(frame.semantic[frame.semantic > 0]))
     print(f"pose x={pos[0]:.3f} y={pos[1]:.3f} z={pos[2]:.3f} yaw={math.degrees(yaw):.1f} deg "
           f"pitch={a.pitch:.1f} deg; {n_ids} instances in view")

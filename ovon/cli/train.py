@@ -3,7 +3,19 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
+
+from ovon.config.base import existing_file, positive
+
+
+@dataclass(frozen=True)
+class TrainArgs:
+    """`ovon train`'s own options through declared domains, as `ovon evaluate`'s: `--episodes -1` would
+    slice the split to all episodes but the last, `--episodes 0` to none; both are one line instead."""
+
+    episodes: int | None = positive(None, flag="--episodes")
+    config: str = existing_file("", optional=True, flag="--config")
 
 
 def register(sub) -> None:
@@ -22,7 +34,7 @@ def register(sub) -> None:
     p.add_argument("--data", help="episode dataset root (holds train/ ...)")
     p.add_argument("--scenes", help="scene-datasets root")
     p.add_argument("--split", default="train")
-    p.add_argument("--episodes", type=int, default=None, help="use at most this many episodes of the split")
+    p.add_argument("--episodes", default=None, help="use at most this many episodes of the split (an integer > 0)")
     p.add_argument("--procedural", metavar="SEEDS",
                    help="ad-hoc episodes on procedural houses instead of a dataset, e.g. 0-7 or 0,3")
     p.add_argument("--preset", choices=["paper", "cpu-small", "tiny"], default="cpu-small")
@@ -41,15 +53,30 @@ def build_config(args):
     return build(args)
 
 
+def check_args(args) -> TrainArgs:
+    """The options checked before any work: the declared domains, a `--config` naming a folder, and an
+    `--out` that cannot be a run folder (empty, an existing file, under a file)."""
+    from ovon.atomic import check_output_path
+    from ovon.config.base import ConfigError, from_args
+
+    if args.config and Path(args.config).is_dir():
+        raise ConfigError(f"--config {args.config!r} is a folder, not a YAML file; fix: pass the path of a YAML "
+                          "file of TrainConfig keys")
+    a = from_args(TrainArgs, args)
+    check_output_path(args.out, "--out", folder=True)
+    return a
+
+
 def cmd_train(args) -> int:
     import os
 
     from ovon.train import EpisodeSource, train
     from ovon.train.distributed import cleanup, launched_by_torchrun
 
+    a = check_args(args)
     cfg = build_config(args)
     out = Path(args.out)
-    source = EpisodeSource(data=args.data, scenes=args.scenes, split=args.split, limit=args.episodes,
+    source = EpisodeSource(data=args.data, scenes=args.scenes, split=args.split, limit=a.episodes,
                            procedural=args.procedural, task=args.task)
     last = train(cfg, source, out, resume=args.resume, init=args.init)  # opens, checks and locks --out
     if int(os.environ.get("RANK", "0")) == 0:

@@ -24,13 +24,15 @@ option that sets a field (used in the fix of the message instead of `--set key=`
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
 import difflib
 import math
 import re
 import types
 import typing
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import MISSING
 from pathlib import Path
 from typing import Any, TypeVar
@@ -423,6 +425,55 @@ def _type_ok(value: Any, tp: Any) -> bool:
 # ----------------------------------------------------------------------------------------------------
 # messages
 
+# Where the values being checked come from, for the fix a message suggests: a command line (None: `--set
+# KEY=VALUE`) or a definition file (`edit FILE at KEY`). Keys of a file that no command reads with --set
+# (an experiment's findings, cells.yaml) would otherwise get a fix the user cannot apply.
+_VALUES_FILE: contextvars.ContextVar[str | None] = contextvars.ContextVar("ovon_values_file", default=None)
+
+
+@contextlib.contextmanager
+def values_from_file(path: str | Path) -> Iterator[None]:
+    """Within the block, messages name a value as `FILE:KEY` and its fix as `edit FILE at KEY`: for
+    configs read from the file `path` with a `where` that starts with it ("main.yaml",
+    "cells.yaml:train.dagger")."""
+    token = _VALUES_FILE.set(str(path))
+    try:
+        yield
+    finally:
+        _VALUES_FILE.reset(token)
+
+
+def _in_file(key: str) -> tuple[str, str] | None:
+    """(file, key inside the file) inside `values_from_file`, else None (the key is --set on a command line)."""
+    source = _VALUES_FILE.get()
+    if source is None:
+        return None
+    for sep in (":", "."):
+        if key.startswith(source + sep):
+            return source, key[len(source) + 1:]
+    return source, key
+
+
+def _shown_key(key: str) -> str:
+    found = _in_file(key)
+    return key if found is None else f"{found[0]}:{found[1]}"
+
+
+def _fix_value(key: str, expected: str) -> str:
+    """The fix that gives `key` a value that is `expected`."""
+    found = _in_file(key)
+    if found is None:
+        return f"--set {key}=VALUE with VALUE {expected}"
+    return f"edit {found[0]} at {found[1]} to {expected}"
+
+
+def _fix_group(where: str) -> str:
+    """The fix that sets the fields of the group `where` one by one."""
+    found = _in_file(where)
+    if found is None:
+        return f"--set {where + '.' if where else ''}FIELD=VALUE"
+    return f"edit {found[0]} at {found[1] or 'its top level'}: write `FIELD: VALUE` lines under it"
+
 
 def _short(v: Any) -> str:
     """repr of a value, head and tail kept when long (a path's file name is at its end)."""
@@ -461,15 +512,16 @@ def _violation(key: str, value: Any, f: dataclasses.Field, tp: Any) -> str:
     default = _default_of(f)
     hide = default is MISSING or default is None or default == "" or dataclasses.is_dataclass(default)
     shown = "" if hide else f" (default {_short(default)})"
-    how = f"pass {flag} with {expected}" if flag else f"--set {key}=VALUE with VALUE {expected}"
-    return f"{flag or key} = {_short(value)}: expected {expected}; fix: {how}{shown}"
+    how = f"pass {flag} with {expected}" if flag else _fix_value(key, expected)
+    return f"{flag or _shown_key(key)} = {_short(value)}: expected {expected}; fix: {how}{shown}"
 
 
 def _unknown(unknown: set[str], valid: list[str], where: str) -> ConfigError:
     hints = []
     for k in sorted(unknown):
         close = difflib.get_close_matches(k, valid, n=1)
-        hints.append(f"{where + '.' if where else ''}{k}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+        key = _shown_key(f"{where}.{k}" if where else k)
+        hints.append(key + (f" (did you mean {close[0]!r}?)" if close else ""))
     return ConfigError(f"unknown config key(s) {', '.join(hints)}; valid keys{' of ' + where if where else ''}: "
                        f"{', '.join(valid)}")
 
@@ -512,9 +564,11 @@ def violations(cfg: Any, where: str = "") -> list[str]:
             continue
         if not r.holds(cfg):
             prefix = f"{where}." if where else ""
-            values = ", ".join(f"{prefix}{k} = {_short(Rule.value(cfg, k))}" for k in r.keys)
+            values = ", ".join(f"{_shown_key(prefix + k)} = {_short(Rule.value(cfg, k))}" for k in r.keys)
             expected = " ".join(f"{prefix}{t}" if t in r.keys else t for t in r.expected.split(" "))
-            out.append(f"{values}: expected {expected}; fix: --set the values so that {expected} holds")
+            found = _in_file(prefix + r.keys[0])
+            how = "--set the values" if found is None else f"edit {found[0]}"
+            out.append(f"{values}: expected {expected}; fix: {how} so that {expected} holds")
     return out
 
 
@@ -538,8 +592,8 @@ def _coerce_field(cls: type, f: dataclasses.Field, tp: Any, value: Any, key: str
         if isinstance(value, tp):
             return value
         if not isinstance(value, dict):
-            raise ConfigError(f"{key} = {_short(value)}: expected a mapping of {tp.__name__} fields "
-                              f"({', '.join(x.name for x in dataclasses.fields(tp))}); fix: --set {key}.FIELD=VALUE")
+            raise ConfigError(f"{_shown_key(key)} = {_short(value)}: expected a mapping of {tp.__name__} fields "
+                              f"({', '.join(x.name for x in dataclasses.fields(tp))}); fix: {_fix_group(key)}")
         return _from_dict(tp, value, key)
     try:
         return _coerce(value, tp, key)
@@ -581,7 +635,7 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 def _merge(cfg: T, data: Mapping[str, Any], where: str) -> T:
     if not isinstance(data, Mapping):
         raise ConfigError(f"{where or type(cfg).__name__} = {_short(data)}: expected a mapping of "
-                          f"{type(cfg).__name__} fields; fix: --set {where + '.' if where else ''}FIELD=VALUE")
+                          f"{type(cfg).__name__} fields; fix: {_fix_group(where)}")
     types_ = _field_types(type(cfg))
     unknown = set(data) - set(types_)
     if unknown:
@@ -641,6 +695,8 @@ def parse_overrides(items: list[str] | tuple[str, ...]) -> dict[str, Any]:
 
 def load_yaml(path: str | Path) -> dict[str, Any]:
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"config file {path} is a folder, not a YAML file; fix: pass the path of a YAML file")
     if not path.is_file():
         raise ConfigError(f"config file {path} does not exist; fix: pass the path of a YAML file")
     try:

@@ -429,8 +429,10 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
     """Run every (split, seed, episode) of `cfg` not yet in `run_dir` (objectnav: a dataset's splits;
     `task.kind=pointnav`: point goals in procedural houses, `ovon.evaluate.pointnav`); returns the summary."""
     from ovon.agents.remote import is_remote
+    from ovon.atomic import check_output_path
     from ovon.runfolder import RunFolder
 
+    check_output_path(run_dir, "--out", folder=True)  # "" would scatter the run's files in the current folder
     p = plan(cfg)
     run_dir = Path(run_dir)
     with RunFolder.open(run_dir, "evaluate", p.config, p.inputs, may_change=MAY_CHANGE, markers=("episodes.jsonl",)):

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from ovon.config.base import ConfigError, from_dict, load_yaml
+from ovon.config.base import ConfigError, from_dict, load_yaml, values_from_file
 from ovon.dataset.io import VAL_SPLITS
 
 DEFS_DIR = Path(__file__).parent / "defs"
@@ -224,14 +224,19 @@ class Catalogue:
 
 # ----- loading ---------------------------------------------------------------------------------------
 def _typed(cls: type, data: Any, where: str) -> Any:
+    """`data` as `cls`; `where` is "FILE" or "FILE:KEY". A bad value's fix says where to edit the file
+    (`values_from_file`): a definition's keys cannot be given with --set."""
     if not isinstance(data, dict):
         raise DefinitionError(f"{where}: expected a mapping of {cls.__name__} fields, got {data!r}")
+    file = where.split(":")[0]
     try:
-        return from_dict(cls, data, where)
+        with values_from_file(file):
+            return from_dict(cls, data, where)
     except DefinitionError:
         raise
     except (ConfigError, TypeError, ValueError) as e:
-        raise DefinitionError(f"{e}; fix: edit {where.split(':')[0]}") from None
+        msg = " ".join(str(e).split())
+        raise DefinitionError(msg if "fix:" in msg else f"{msg}; fix: edit {file}") from None
 
 
 def _named(cls: type, data: Any, where: str) -> dict[str, Any]:
@@ -243,6 +248,9 @@ def _named(cls: type, data: Any, where: str) -> dict[str, Any]:
 
 
 def _read(path: Path) -> dict:
+    if path.is_dir():  # not "does not exist": it does, as a folder
+        raise DefinitionError(f"{path} is a folder, not a YAML file; fix: pass the path of a .yaml file, e.g. "
+                              f"{path / 'NAME.yaml'}")
     try:
         return load_yaml(path)
     except ConfigError as e:

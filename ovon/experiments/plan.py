@@ -118,7 +118,7 @@ def resolve(experiments: list[Experiment], scale: str, root: str | Path, overrid
     sc = cat.scales[scale]
     if overrides:
         try:
-            sc = merge(sc, parse_overrides(list(overrides)), "--set")
+            sc = merge(sc, parse_overrides(list(overrides)))  # keys as typed: the fix reads `--set KEY=VALUE`
         except ConfigError as e:
             raise DefinitionError(f"{e}; --set here takes the scale's keys (data.*, train.*, evaluate.*)") from None
     _check_scale(sc)

@@ -296,7 +296,7 @@ def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None
     console = console or Console()
     ids = select(plan, only, shard)
     statuses = plan_status(plan)
-    cascade = dependents(plan, match_cells(plan, list(redo_cells))) if redo_cells else []
+    cascade = dependents(plan, match_cells(plan, list(redo_cells), flag="--redo")) if redo_cells else []
     if "data:data" in cascade and not plan.cells["data:data"].commands:
         raise DefinitionError(f"--redo data: scale {plan.scale.name!r} reads your own dataset ({plan.episodes_dir}), "
                               "which the runner never moves; fix: --redo the training or evaluation cells instead")

@@ -29,8 +29,9 @@ def parse_shard(text: str | None) -> tuple[int, int] | None:
     return index, count
 
 
-def match_cells(plan: Plan, names: list[str]) -> list[str]:
-    """Cell ids for names: `train:NAME`, `eval:NAME` or a bare NAME (its training and evaluation cells)."""
+def match_cells(plan: Plan, names: list[str], flag: str = "--only") -> list[str]:
+    """Cell ids for names: `train:NAME`, `eval:NAME` or a bare NAME (its training and evaluation cells).
+    `flag`: the option the names came from (--only, --redo), for the message naming an unknown one."""
     out: list[str] = []
     for name in names:
         hits = [name] if name in plan.cells else [c for c in (f"train:{name}", f"eval:{name}") if c in plan.cells]
@@ -38,8 +39,8 @@ def match_cells(plan: Plan, names: list[str]) -> list[str]:
             hits = [DATA]
         if not hits:
             valid = sorted({c.split(":", 1)[1] for c in plan.cells})
-            raise DefinitionError(f"--only: no cell {name!r} in {plan.names}; valid: {', '.join(valid)} (or "
-                                  "train:NAME / eval:NAME)")
+            raise DefinitionError(f"{flag}: no cell {name!r} in {plan.names}; valid: {', '.join(valid)} (or "
+                                  f"train:NAME / eval:NAME); fix: {flag} one of them")
         out += [h for h in hits if h not in out]
     return out
 

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ovon.atomic import write_json
+from ovon.atomic import check_output_path, write_json
 from ovon.config.base import to_dict
+from ovon.experiments.definitions import DefinitionError
 from ovon.experiments.plan import Cell, Plan, display
 from ovon.runfolder import FileLock, RunFolderError, differences
 
@@ -67,11 +68,19 @@ def lock_path(plan: Plan, cell: Cell) -> Path:
 
 
 def read_record(plan: Plan, cell: Cell) -> dict | None:
+    """The cell's record, None when it has none, {"state": "unreadable"} when it is torn or garbage. A
+    file where a folder of the root should be is not an unreadable record (every cell would read as
+    "changed"): it is refused as the root it is."""
     path = record_path(plan, cell)
     try:
         return json.loads(path.read_text())
     except FileNotFoundError:
         return None
+    except NotADirectoryError:
+        check_output_path(plan.root, "--root", folder=True, writable=False, error=DefinitionError)
+        check_output_path(path.parent, f"--root {plan.root}: the cells folder", folder=True, writable=False,
+                          error=DefinitionError)
+        return {"state": "unreadable"}
     except (OSError, ValueError):
         return {"state": "unreadable"}
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from ovon.atomic import atomic_write_text
+from ovon.atomic import atomic_write_text, check_output_path
 from ovon.reports.compare import load_meta, load_run, load_skipped, markdown_report
 from ovon.reports.labels import run_label
 from ovon.reports.plots import plot_failures, plot_sr_per_category, plot_sr_vs_distance
@@ -17,7 +17,9 @@ def _slug(s: str) -> str:
 
 def build_report(run_dirs: list[str | Path], out_dir: str | Path) -> Path:
     """Tables and figures for the run folders. Rows are named by what the run uses (`run_label`: agent,
-    perception, noise); figure files by the run's `name`."""
+    perception, noise); figure files by the run's `name`. An `out_dir` that cannot be a folder (empty,
+    a file, under a file) is refused before anything is read or drawn."""
+    check_output_path(out_dir, "--out", folder=True)
     loaded = [load_run(d) for d in run_dirs]
     metas = [load_meta(d) for d in run_dirs]
     labels = [run_label(m) if m else name for (name, _), m in zip(loaded, metas)]

@@ -100,9 +100,12 @@ def learning_curve(rows: list[dict], metric: str = "episode/success", window: in
 def plot_learning_curves(
     runs: list[str | Path], out: str | Path, metric: str = "episode/success", window: int = 10
 ) -> Path:
-    """`metric` vs env steps for training run folders (their `metrics.jsonl`), one line per run."""
-    from ovon.atomic import atomic_write_with
+    """`metric` vs env steps for training run folders (their `metrics.jsonl`), one line per run. `out`
+    (a PNG) is checked before the runs are read."""
+    from ovon.atomic import atomic_write_with, check_output_path
     from ovon.train.logging import read_metrics
+
+    check_output_path(out, "--out", expected="the path of a .png file", example="curve.png", suffixes=(".png",))
 
     fig = Figure(figsize=(6.4, 3.6))
     ax = fig.add_subplot()

@@ -18,11 +18,13 @@ import cv2
 import imageio.v2 as imageio
 import numpy as np
 
+from ovon.atomic import check_output_path
 from ovon.config.base import from_dict
 from ovon.config.sim import SimConfig
 from ovon.config.task import TaskConfig
 from ovon.evaluate.results import read_records
 from ovon.evaluate.runner import episode_seed
+from ovon.runfolder import IDENTITY_FILE
 
 
 def _depth_to_rgb(depth: np.ndarray, max_depth: float) -> np.ndarray:
@@ -116,18 +118,61 @@ def _agent_view(meta: dict, spec, ep_seed: int, sim: SimConfig, h: int) -> Agent
     return AgentView(agent, episode_info(spec, ep_seed, sim), h)
 
 
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers ffmpeg writes libx264 into
+
+
+def run_input(run_dir: Path, meta: dict, key: str, given: str | None = None) -> str:
+    """Where the run's input `key` ("data" or "scenes") is now. `given` (the caller's) wins. run.json keeps
+    the path as `ovon evaluate` was given it: a relative one is relative to the folder that command ran
+    in, not to where `ovon video` runs, so it is taken from run_identity.json, which records each input's
+    absolute path (`ovon.runfolder.path_identity`). Run folders without one read it from here."""
+    if given:
+        return str(given)
+    stored = str(meta.get(key) or "")
+    if not stored or Path(stored).is_absolute():
+        return stored
+    try:
+        identity = json.loads((run_dir / IDENTITY_FILE).read_text(encoding="utf-8"))
+        recorded = str(identity["inputs"][key]["path"])
+    except (OSError, ValueError, KeyError, TypeError):
+        recorded = ""
+    if recorded and Path(recorded).exists():
+        return recorded
+    if recorded:
+        raise FileNotFoundError(f"{run_dir}/run.json: {key} {stored!r} was {recorded} when the evaluation ran "
+                                f"(relative to the folder it ran in), and that no longer exists; fix: put it back "
+                                f"at {recorded} (or give render_video its new path: {key}=...)")
+    if not Path(stored).exists():
+        raise FileNotFoundError(f"{run_dir}/run.json: {key} {stored!r} is relative to the folder `ovon evaluate` "
+                                f"ran in and does not exist from {Path.cwd()}; fix: run `ovon video` from that "
+                                "folder")
+    return stored
+
+
 def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: str | None = None,
                  seed: int | None = None, fps: int = 8, scene: str | None = None,
-                 agent_view: bool = True) -> Path:
-    """`agent_view`: add the agent's `debug_frame` panel when its class has one (see the module docstring)."""
+                 agent_view: bool = True, data: str | None = None, scenes: str | None = None) -> Path:
+    """`agent_view`: add the agent's `debug_frame` panel when its class has one (see the module docstring).
+    `data` / `scenes`: the episode dataset and scenes roots when they moved (default: the run's own,
+    see `run_input`). `out` is checked before the episode is replayed (rendering it takes a while)."""
     from ovon.env import make_objectnav
     from ovon.evaluate.harness import load_specs
 
+    out = check_output_path(out, "--out", expected="the path of an .mp4 file", example="episode.mp4",
+                            suffixes=VIDEO_SUFFIXES)
     run_dir = Path(run_dir)
     meta_path = run_dir / "run.json"
     if not meta_path.exists():
         raise FileNotFoundError(f"{run_dir} has no run.json: is it a folder written by `ovon evaluate`?")
-    meta = json.loads(meta_path.read_text())
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        if not isinstance(meta, dict):
+            raise ValueError(f"holds a {type(meta).__name__}, not an object")
+    except (ValueError, RecursionError) as e:
+        raise ValueError(f"{meta_path} is unreadable ({type(e).__name__}); fix: re-run the `ovon evaluate` that "
+                         "wrote it") from None
+    meta = {**meta, "data": run_input(run_dir, meta, "data", data),
+            "scenes": run_input(run_dir, meta, "scenes", scenes)}
     recs = [r for r in read_records(run_dir) if str(r["episode_id"]) == str(episode_id)
             and (split is None or r["split"] == split) and (seed is None or int(r["seed"]) == seed)
             and (scene is None or scene in r["scene"])]
@@ -189,13 +234,16 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
     last = frames[-1].copy()
     cv2.putText(last, verdict, (8, 60), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 0, 0), 2, cv2.LINE_AA)
     frames += [last] * fps
-    out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.stem}.tmp{out.suffix}")
     # even sizes for yuv420p
     hh, ww = (frames[0].shape[0] // 2) * 2, (frames[0].shape[1] // 2) * 2
-    with imageio.get_writer(tmp, fps=fps, codec="libx264", macro_block_size=1) as w:
-        for f in frames:
-            w.append_data(np.ascontiguousarray(f[:hh, :ww]))
-    tmp.replace(out)
+    try:
+        with imageio.get_writer(tmp, fps=fps, codec="libx264", macro_block_size=1) as w:
+            for f in frames:
+                w.append_data(np.ascontiguousarray(f[:hh, :ww]))
+        tmp.replace(out)
+    except BaseException:
+        tmp.unlink(missing_ok=True)  # no half-written video left beside the old one
+        raise
     return out
