@@ -262,3 +262,31 @@ def test_video_from_another_folder_finds_the_runs_relative_inputs(tiny_dataset, 
     rc, _, errors = run([*video[:-1], "v2.mp4"], capsys)
     one_line(rc, errors, "data 'data/eps'", str(where / "data" / "eps"), "relative to the folder it ran in")
     assert not (elsewhere / "v2.mp4").exists()
+
+
+def test_noise_twice_stop_probability_and_negative_house_seed_are_refused():
+    from ovon.agents.random_agent import RandomAgent
+    from ovon.config.base import ConfigError
+    from ovon.evaluate.harness import parse_noise
+    from ovon.sim.world import load_scene_any
+
+    with pytest.raises(ConfigError, match="actuation noise given twice"):
+        parse_noise("actuation:ilqr,actuation:movebase")
+    for p in (2, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="a probability in"):
+            RandomAgent(stop_probability=p)
+    with pytest.raises(ValueError, match="seed must be >= 0"):
+        load_scene_any("procedural:-1")
+
+
+def test_a_torn_split_file_is_named_even_when_shards_hold_the_episodes(tiny_dataset, tmp_path):
+    from ovon.dataset.io import DatasetError, EpisodeDataset
+    from ovon.dataset.validate import split_problem
+
+    data = tmp_path / "data"
+    shutil.copytree(tiny_dataset, data)
+    shell = data / "val_seen" / "val_seen.json.gz"
+    assert shell.is_file()
+    shell.write_bytes(b"garbage")
+    with pytest.raises(DatasetError, match="val_seen.json.gz"):
+        split_problem(EpisodeDataset(data, "val_seen"))

@@ -147,7 +147,10 @@ def warn_skipped(where: str, skipped: Counter, total: int) -> None:
 
 
 def split_problem(ds: EpisodeDataset) -> str | None:
-    """Why a split folder holds no episodes at all (no content/ folder, no shards), or None."""
+    """Why a split folder holds no episodes at all (no content/ folder, no shards), or None. A split's
+    `<split>.json.gz` is read even when its shards hold every episode: a torn one means a broken copy of the
+    dataset, which is named (DatasetError) instead of being passed over."""
+    ds.shell()
     if not ds.content_dir.is_dir():
         if ds.shell().get("episodes"):
             return None

@@ -107,8 +107,13 @@ def parse_noise(spec: str | None) -> NoiseConfig:
     models = typing.get_args(typing.get_type_hints(NoiseConfig)["actuation"])
     odo_modes = typing.get_args(typing.get_type_hints(NoiseConfig)["odometry_mode"])
     fix = "fix: use e.g. --noise actuation,odometry or --noise actuation:movebase*0.5"
+    seen: dict[str, str] = {}
     for item in [s.strip() for s in spec.split(",") if s.strip()]:
         name, _, arg = item.partition(":")
+        if name in seen:  # the last one would silently win
+            raise ConfigError(f"--noise {spec!r}: {name} noise given twice ({seen[name]!r} and {item!r}); fix: keep "
+                              "one of them")
+        seen[name] = item
         if name == "actuation":
             model, _, mult = (arg or "ilqr").partition("*")
             if model not in models:

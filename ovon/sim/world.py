@@ -21,6 +21,8 @@ def load_scene_any(scene: str | Scene, up: str | None = None) -> Scene:
             seed = int(scene.split(":", 1)[1])
         except ValueError:
             raise ValueError(f"bad procedural scene id {scene!r}: expected procedural:<integer seed>") from None
+        if seed < 0:  # as `ovon scenes generate --seed` refuses: house seeds are non-negative
+            raise ValueError(f"bad procedural scene id {scene!r}: the seed must be >= 0; fix: e.g. procedural:0")
         return generate_house(seed)
     from ovon.scenes.hm3dsem import load_scene
 
