@@ -11,7 +11,7 @@ import gzip
 import io
 import json
 import os
-import tempfile
+import secrets
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -57,18 +57,79 @@ def check_output_path(path: str | Path, what: str = "--out", *, folder: bool = F
     return p
 
 
+# Mode asked for when a temp file is created: the kernel clears the umask's bits (and a folder's default
+# ACL applies), so the file gets exactly the permissions `open(path, "w")` would give it.
+NEW_FILE_MODE = 0o666
+_TEMP_TRIES = 100
+
+
+def _create_temp(folder: Path, name: str, suffix: str = ".tmp") -> tuple[int, Path]:
+    """Create and open a new, empty temp file `.<name>.<random><suffix>` in `folder`: (fd, path).
+
+    Why not `tempfile.mkstemp`: it creates its files with mode 0600 whatever the umask, and `os.replace`
+    keeps that mode, so every scene, episode shard, categories.json and run file was unreadable by the other
+    users or containers sharing the data. Created here with `O_CREAT | O_EXCL` (never an existing file or a
+    symlink, as mkstemp) and mode 0666, which the kernel reduces by the process umask, as for a plain
+    `open()`: no umask to read (reading it with `os.umask` sets it, a race with other threads), and a
+    folder's default ACL is honoured too. The name keeps the `.<name>.<random>.tmp` shape that
+    `ovon.runfolder` sweeps after a killed run and that dataset readers skip (a leading dot)."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    flags |= getattr(os, "O_BINARY", 0)
+    for _ in range(_TEMP_TRIES):
+        tmp = folder / f".{name}.{secrets.token_hex(6)}{suffix}"
+        try:
+            return os.open(tmp, flags, NEW_FILE_MODE), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"{folder}: no free temp file name for {name} after {_TEMP_TRIES} tries; fix: remove the "
+                          f"stale .{name}.*{suffix} files there")
+
+
+def _fsync(path: Path) -> None:
+    """Flush a file written by another library (by path) to disk before it is renamed into place."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_BINARY", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], Any]) -> Path:
     """Call `write(f)` on a temp file in the target folder, fsync, then `os.replace` it into place.
 
-    The one atomic writer of the project: every file a run or a generator produces goes through it."""
+    The one atomic writer of the project: every file a run or a generator produces goes through it (or
+    through `atomic_write_path` for writers that need a file name). The file gets the permissions a plain
+    `open()` would give it (0666 less the umask, see `_create_temp`), not mkstemp's 0600."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _create_temp(path.parent, path.name)
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
             f.flush()
             os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
+def atomic_write_path(path: str | Path, write: Callable[[Path], Any]) -> Path:
+    """`atomic_write_with` for writers that take a file name, not a file object (a video encoder, a
+    library's `save(path)`): `write(tmp)` writes a temp path in the target folder that ends with the
+    target's suffix (encoders choose the format by it), then it is fsynced and renamed into place; on any
+    error it is removed, and the previous file stays. Same permissions as a plain `open()`."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = _create_temp(path.parent, path.stem, suffix=f".tmp{path.suffix}")
+    os.close(fd)
+    try:
+        write(tmp)
+        _fsync(tmp)
         os.replace(tmp, path)
     except BaseException:
         try:

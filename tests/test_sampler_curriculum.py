@@ -99,3 +99,11 @@ def test_curriculum_config_has_a_domain() -> None:
     with pytest.raises(ConfigError, match="curriculum.start_m"):
         merge(PRESETS["tiny"](), parse_overrides(["curriculum.start_m=-1"]))
     assert np.isinf(EpisodeSampler(_Recorder(), _specs(), seed=0).max_distance())
+
+
+def test_reset_options_are_refused_not_ignored() -> None:
+    """The sampler picks the episodes: an asked-for episode would silently be another one."""
+    sampler = EpisodeSampler(_Recorder(), _specs(), seed=0, scene_repeat=2)
+    with pytest.raises(ValueError, match="samples its own episodes"):
+        sampler.reset(options={"episode": _specs()[0]})
+    sampler.reset(options={})

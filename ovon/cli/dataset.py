@@ -120,6 +120,10 @@ def cmd_generate(args) -> int:
     a = from_args(GenerateArgs, args, split=tuple(args.split) if args.split else None)
     check_output_path(args.out, "--out", folder=True)  # "" would write the dataset into the current folder
     cfg = generation_config(args)
+    # the category split that `generate` will read (given, or left in --out by an earlier run), checked first
+    cat_path = Path(a.categories) if a.categories else Path(args.out) / "categories.json"
+    if cat_path.is_file():
+        check_generation_categories(cat_path, a.scenes, a.split)
     rep = generate(a.scenes, args.out, cfg, splits=a.split, workers=a.workers, executor=a.executor,
                    progress=not args.no_progress, category_split_path=a.categories or None)
     n = sum(rep.episodes.values())
@@ -134,9 +138,39 @@ def cmd_generate(args) -> int:
     return 0
 
 
+def check_generation_categories(path: Path, scenes: str, splits: tuple[str, ...]) -> None:
+    """Refuse, before any scene is processed, a categories.json that cannot give the requested splits:
+    its lists broken (`check_category_split`: overlapping, unknown or empty lists), or a split whose
+    categories no scene of the kind it is generated on (train scenes for train, val scenes otherwise) has
+    annotated. Why: generation used to run and then either write empty splits or blame the scenes ("repair
+    those scenes") for a file made for other scenes. Cheap: semantic.txt files only, no mesh."""
+    from ovon.dataset.generate import discover_scenes, scene_categories
+    from ovon.dataset.records import DatasetError
+    from ovon.dataset.splits import load_category_split
+
+    cs = load_category_split(path, splits=splits)
+    refs = discover_scenes(scenes)
+    present: dict[str, set[str]] = {"train": set(), "val": set()}
+    for ref in refs:
+        present[ref.kind] |= scene_categories(ref)
+    for split in splits:
+        kind = "train" if split == "train" else "val"
+        if not any(r.kind == kind for r in refs):
+            continue  # `generate` names the missing scene folder
+        cats = cs.categories(split)
+        if not set(cats) & present[kind]:
+            key = split if split in HELD_OUT_SPLITS else "train"
+            shown = ", ".join(repr(c) for c in cats[:5]) + (f" and {len(cats) - 5} more" if len(cats) > 5 else "")
+            raise DatasetError(f"{path}: none of its {len(cats)} {key} categories ({shown}) is annotated in a {kind} "
+                               f"scene of {scenes}, so the {split} split would get no episode; expected a "
+                               f"categories.json made for these scenes; fix: pass --categories with a file whose "
+                               f"{key} names categories of the {kind} scenes (`ovon dataset splits --scenes {scenes}`, "
+                               f"another --seed if needed), or leave --split {split} out")
+
+
 def cmd_splits(args) -> int:
     from ovon.config.base import ConfigError
-    from ovon.dataset.splits import SplitConfig, split_categories
+    from ovon.dataset.splits import SplitConfig, empty_held_out_problem, split_categories
 
     a = from_args(SplitsArgs, args)
     if args.vocabulary == bool(a.scenes):
@@ -154,6 +188,9 @@ def cmd_splits(args) -> int:
         cats = sorted(set().union(*(scene_categories(r) for r in discover_scenes(a.scenes))))
     cs = split_categories(cats, SplitConfig(seed=a.seed, holdout_fraction=a.holdout,
                                             similarity_threshold=a.threshold))
+    problem = empty_held_out_problem(cs, len(cats), a.holdout)
+    if problem:  # a file with an empty held-out list gives a dataset that `dataset validate` rejects
+        raise ConfigError(problem)
     cs.save(a.out)
     for name in HELD_OUT_SPLITS:
         rng = cs.similarity_range(name)

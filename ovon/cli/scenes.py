@@ -5,19 +5,47 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import time
+from dataclasses import MISSING, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ovon.atomic import check_output_path
+from ovon.config.base import ConfigError, from_args, in_range
 
 # House seeds: seed * SEED_STRIDE + split base + index, so the default seed gives HM3D-like five-digit
 # scene ids (train 00000.., val 80000..) and different dataset seeds never share a house.
 SEED_STRIDE = 100_000
 SPLIT_BASE = {"train": 0, "val": 80_000}
 SPLIT_CAPACITY = {"train": 80_000, "val": 20_000}
+# `generate_house` takes 32-bit house seeds (it refuses larger ones): the last house of a dataset seed must fit
+MAX_HOUSE_SEED = 2**32 - 1
+MAX_DATASET_SEED = (MAX_HOUSE_SEED - (SEED_STRIDE - 1)) // SEED_STRIDE  # 42948: its last house still fits
+
+
+@dataclass(frozen=True)
+class GenerateArgs:
+    """`ovon scenes generate`'s options through declared domains, checked before the split folder is made
+    (`--count 100000000` used to fail in the loop, leaving an empty folder; `--count 0` wrote nothing and
+    succeeded; `--workers 0` was silently 1). --count's upper bound depends on --split (`check_count`)."""
+
+    count: int = in_range(MISSING, 1, None, flag="--count")  # required; at most SPLIT_CAPACITY[split]
+    split: str = "train"
+    seed: int = in_range(0, 0, MAX_DATASET_SEED, flag="--seed")
+    workers: int | None = in_range(None, 1, 1024, flag="--workers")  # None: min(2, cpus)
+
+
+def check_count(count: int, split: str) -> None:
+    """A split holds at most SPLIT_CAPACITY[split] houses per dataset seed (the next indices would be
+    the other split's or the next seed's houses): one line naming --count, before any work."""
+    cap = SPLIT_CAPACITY[split]
+    if count > cap:
+        raise ConfigError(f"--count = {count}: --split {split} holds at most {cap} houses per --seed (more would "
+                          f"reuse the houses of another split or seed); expected an integer in [1, {cap}]; fix: pass "
+                          f"--count {cap} or less (and another --seed for more houses)")
 
 
 def house_seed(seed: int, split: str, index: int) -> int:
@@ -29,8 +57,9 @@ def house_seed(seed: int, split: str, index: int) -> int:
         raise ValueError(
             f"{split} holds at most {SPLIT_CAPACITY[split]} houses per seed, index {index} is out of range"
         )
-    if seed < 0:
-        raise ValueError(f"--seed must be >= 0, got {seed}")
+    if not 0 <= seed <= MAX_DATASET_SEED:
+        raise ValueError(f"--seed = {seed}: expected an integer in [0, {MAX_DATASET_SEED}] (house seeds are kept to "
+                         "32 bits); fix: pass a smaller --seed")
     return int(seed) * SEED_STRIDE + SPLIT_BASE[split] + int(index)
 
 
@@ -80,27 +109,27 @@ def cmd_generate(args: argparse.Namespace) -> int:
     from ovon.parallel import progress_bar, run_jobs
 
     console = Console()
-    if args.count < 0:
-        raise ValueError(f"--count must be >= 0, got {args.count}")
+    a = from_args(GenerateArgs, args)
+    check_count(a.count, a.split)
     check_output_path(args.out, "--out", folder=True)  # "" would scatter houses into the current folder
-    split_dir = Path(args.out) / args.split
+    split_dir = Path(args.out) / a.split
     split_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     done = _done_seeds(split_dir)
     jobs = []
-    for i in range(args.count):
-        s = house_seed(args.seed, args.split, i)
+    for i in range(a.count):
+        s = house_seed(a.seed, a.split, i)
         if s not in done:
-            jobs.append((i, s, args.split, str(split_dir)))
-    skipped = args.count - len(jobs)
-    workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
-    workers = max(1, min(workers, len(jobs) or 1))
+            jobs.append((i, s, a.split, str(split_dir)))
+    skipped = a.count - len(jobs)
+    workers = a.workers if a.workers is not None else min(2, os.cpu_count() or 1)
+    workers = min(workers, len(jobs) or 1)
     console.print(
-        f"generating {len(jobs)} {args.split} houses into {split_dir} "
+        f"generating {len(jobs)} {a.split} houses into {split_dir} "
         f"({skipped} already there, {workers} worker{'s' if workers > 1 else ''})"
     )
     results = []
-    with progress_bar(f"scenes/{args.split}", total=len(jobs)) as bar:
+    with progress_bar(f"scenes/{a.split}", total=len(jobs)) as bar:
         for res in run_jobs(_generate_one, jobs, workers=workers):
             results.append(res)
             bar.advance(1)
@@ -117,6 +146,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     from ovon.scenes.hm3dsem import load_scene
     from ovon.scenes.inspect import print_summary, summarize
 
+    check_up_option(args.up)
     if str(args.path).lower().endswith(".navmesh"):
         return _inspect_navmesh(args)
     scene = load_scene(args.path, up=args.up)
@@ -179,6 +209,7 @@ def cmd_render_topdown(args: argparse.Namespace) -> int:
 
     # checked before the scene is loaded and drawn
     check_output_path(args.out, "--out", expected="the path of a .png file", example="topdown.png")
+    check_up_option(args.up)
     out = render_topdown(load_scene(args.path, up=args.up), args.out, floor=args.floor)
     print(f"wrote {out}")
     return 0
@@ -228,6 +259,42 @@ def cmd_vocabulary(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_up_option(up: str | None, scene: str | None = None) -> None:
+    """Refuse a bad `--up` before the scene is loaded, one line naming it (`scenes inspect`,
+    `render-topdown`, `sim view`). Why here: the scene loaders read --up only for scans and bare meshes,
+    so `--up q` was ignored for a procedural house while a glb refused it, and `--up 0,0,0` was refused as
+    "expected three numbers" although it is three. A procedural house (`scene` = procedural:<seed>) is
+    built y-up: any --up for it is refused (as for a scene written by ovon), never silently ignored."""
+    if up is None:
+        return
+    from ovon.scenes.hm3dsem.upaxis import AXES, parse_up
+
+    axes = ", ".join(AXES)
+    expected = f"one of {axes} or three numbers x,y,z (a non-zero vector)"
+    t = up.strip().lower()
+    if not t:
+        raise ConfigError(f"--up {up!r} is empty; expected {expected}; fix: e.g. --up z, or leave --up out (the "
+                          "habitat config's up axis, else y)")
+    parts = t.split(",")
+    if t not in AXES and len(parts) == 3:
+        try:
+            v = [float(x) for x in parts]
+        except ValueError:
+            v = []
+        if v and not all(math.isfinite(x) for x in v):
+            raise ConfigError(f"--up {up!r}: expected three finite numbers x,y,z; fix: e.g. --up 0,0,1")
+        if v and math.hypot(*v) < 1e-9:
+            raise ConfigError(f"--up {up!r} is the zero vector, which points nowhere; expected three numbers x,y,z "
+                              "not all zero (the scene's up direction); fix: e.g. --up 0,0,1 for a z-up scan")
+    try:
+        parse_up(up)
+    except ValueError:
+        raise ConfigError(f"--up {up!r}: expected {expected}; fix: e.g. --up z for a z-up scan") from None
+    if scene is not None and str(scene).startswith("procedural:"):
+        raise ConfigError(f"--up {up}: procedural houses ({scene}) are built y-up already, --up would be ignored; "
+                          "fix: drop --up")
+
+
 def add_up_argument(p: argparse.ArgumentParser) -> None:
     p.add_argument("--up", default=None, metavar="AXIS",
                    help="up axis of a scan / bare mesh: y, z, -z, x, ... or x,y,z (default: the habitat "
@@ -240,10 +307,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     g = sub.add_parser("generate", help="write procedural houses in the HM3D layout DIR/<split>/<NNNNN-id>/")
     g.add_argument("--split", choices=sorted(SPLIT_BASE), default="train")
-    g.add_argument("--count", type=int, required=True, help="number of houses in the split")
-    g.add_argument("--seed", type=int, default=0, help="dataset seed; house seeds derive from it")
+    g.add_argument("--count", required=True,
+                   help=f"number of houses in the split (1 to {SPLIT_CAPACITY['train']} train, "
+                        f"{SPLIT_CAPACITY['val']} val)")
+    g.add_argument("--seed", default=0, help=f"dataset seed (0 to {MAX_DATASET_SEED}); house seeds derive from it")
     g.add_argument("--out", required=True, help="dataset folder (DATASET_DIR)")
-    g.add_argument("--workers", type=int, default=None, help="worker processes (default: min(2, cpus))")
+    g.add_argument("--workers", default=None, help="worker processes (default: min(2, cpus))")
     g.set_defaults(func=cmd_generate)
 
     i = sub.add_parser("inspect", help="print a summary of one scene (folder or any of its files) or of a habitat "

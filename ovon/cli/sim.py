@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ovon.config.base import Domain, Pattern, constrained, in_range, non_negative
+from ovon.config.base import Domain, Pattern, constrained, in_range, non_empty, non_negative
 
 # A pose is metres around the scene's origin (and a yaw in degrees): far beyond this is a typo.
 POSE_LIMIT = 1e5
@@ -34,6 +34,21 @@ class ViewArgs:
     seed: int = non_negative(0, flag="--seed")
     out: str = constrained("", Pattern(r"(?s).*[^/\\]\.[pP][nN][gG]", "the path of a .png file, e.g. frame.png"),
                            flag="--out")
+
+
+@dataclass(frozen=True)
+class BenchArgs:
+    """`ovon sim bench`'s own options through declared domains, checked before the scene is loaded: each
+    message names the option that is wrong (one range check used to blame --workers for a bad
+    --envs-per-worker, numpy's "expected non-negative integer" stood for a bad --seed, and --goal ""
+    silently meant the default goal)."""
+
+    scene: str = non_empty("procedural:0", flag="--scene")
+    goal: str | None = non_empty(None, flag="--goal")  # None: the scene's most frequent floor object
+    workers: int = in_range(1, 0, 1024, flag="--workers")  # 0: one env stepped in this process
+    envs_per_worker: int = in_range(4, 1, 1024, flag="--envs-per-worker")
+    steps: int = in_range(1000, 1, 100_000_000, flag="--steps")
+    seed: int = non_negative(0, flag="--seed")
 
 
 def _camera_args(p) -> None:
@@ -66,11 +81,11 @@ def register(sub) -> None:
     b.add_argument("--goal", help="goal category (default: the scene's most frequent floor object)")
     _camera_args(b)
     b.add_argument("--no-rgb", action="store_true", help="skip the RGB channel (what oracle encoders need)")
-    b.add_argument("--workers", type=int, default=1,
+    b.add_argument("--workers", default=1,
                    help="worker processes of the vector env; 0: one env stepped in this process")
-    b.add_argument("--envs-per-worker", type=int, default=4, help="envs hosted by each worker process")
-    b.add_argument("--steps", type=int, default=1000, help="timed env steps over all envs")
-    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--envs-per-worker", default=4, help="envs hosted by each worker process")
+    b.add_argument("--steps", default=1000, help="timed env steps over all envs")
+    b.add_argument("--seed", default=0)
     b.set_defaults(func=cmd_bench)
 
 
@@ -121,6 +136,7 @@ def cmd_view(args) -> int:
     from PIL import Image
 
     from ovon.atomic import atomic_write_with, check_output_path
+    from ovon.cli.scenes import check_up_option
     from ovon.config.base import ConfigError, from_args
     from ovon.config.sim import SimConfig
     from ovon.sim.render import make_renderer
@@ -130,6 +146,7 @@ def cmd_view(args) -> int:
     # a folder, or a path under an existing file: refused before the scene is loaded and rendered
     check_output_path(a.out, "--out", expected="the path of a .png file", example="frame.png", error=ConfigError)
     cam = _camera(args)
+    check_up_option(args.up, args.scene)
     scene = load_scene_any(args.scene, up=args.up)
     if a.pose is not None:
         pos, yaw = np.array(a.pose[:3], dtype=np.float64), math.radians(a.pose[3])
@@ -166,22 +183,21 @@ def cmd_view(args) -> int:
 def cmd_bench(args) -> int:
     import dataclasses
 
+    from ovon.config.base import from_args
     from ovon.config.sim import SimConfig
     from ovon.env.bench import measure_throughput, pick_goal
     from ovon.env.stack import EnvRecipe
 
     os.environ.setdefault("LP_NUM_THREADS", "0")
-    if args.workers < 0 or args.steps < 1 or args.envs_per_worker < 1:
-        raise ValueError(f"--workers must be >= 0 (got {args.workers}), --steps and --envs-per-worker >= 1 "
-                         f"(got {args.steps}, {args.envs_per_worker})")
-    goal = args.goal or pick_goal(args.scene)
+    a = from_args(BenchArgs, args)
     cam = dataclasses.replace(_camera(args), rgb=not args.no_rgb)
-    recipe = EnvRecipe(sim=SimConfig(camera=cam), scene=args.scene, goal=goal)
-    envs = args.envs_per_worker * max(1, args.workers)
-    r = measure_throughput(recipe, workers=args.workers, envs=envs, steps=args.steps, seed=args.seed)
-    where = "in this process" if args.workers == 0 else f"{r['envs']} envs on {r['workers']} worker(s)"
+    goal = a.goal if a.goal is not None else pick_goal(a.scene)
+    recipe = EnvRecipe(sim=SimConfig(camera=cam), scene=a.scene, goal=goal)
+    envs = a.envs_per_worker * max(1, a.workers)
+    r = measure_throughput(recipe, workers=a.workers, envs=envs, steps=a.steps, seed=a.seed)
+    where = "in this process" if a.workers == 0 else f"{r['envs']} envs on {r['workers']} worker(s)"
     channels = "depth+semantic" if args.no_rgb else "rgb+depth+semantic"
-    print(f"scene {args.scene}, goal {goal!r}, {args.width}x{args.height} {channels}, backend {args.backend}, "
+    print(f"scene {a.scene}, goal {goal!r}, {args.width}x{args.height} {channels}, backend {args.backend}, "
           f"{where}: {r['steps']} steps in {r['seconds']:.2f} s (setup {r['setup_s']:.1f} s, "
           f"{r['cpu_ms_per_step']:.2f} CPU ms/step)")
     print(f"{r['steps_per_s']:.1f} steps/s")

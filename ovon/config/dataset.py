@@ -44,7 +44,8 @@ class StartConfig:
 class SplitGenConfig:
     seed: int = non_negative(0)
     holdout_fraction: float = in_range(0.25, 0.0, 1.0, lo_open=True, hi_open=True)
-    similarity_threshold: float = in_range(0.68, -1.0, 1.0)
+    # <= 0 or 1 would leave a held-out list empty
+    similarity_threshold: float = in_range(0.68, 0.0, 1.0, lo_open=True, hi_open=True)
     children: bool = True  # children_object_categories from synonym families (splits.children_for)
     # Children = same shape family AND text similarity >= this. Higher than the split threshold because at
     # 0.68 a third of the categories get children ("bathroom cabinet" -> five other cabinets).

@@ -399,7 +399,7 @@ def generate(
     cats_by_scene = {r.stem: scene_categories(r) for r in refs}
     cat_path = Path(category_split_path) if category_split_path else out / "categories.json"
     if cat_path.exists():
-        csplit = load_category_split(cat_path)
+        csplit = load_category_split(cat_path, splits=splits)
     else:
         all_cats = sorted(set().union(*cats_by_scene.values()))
         if not all_cats:

@@ -136,7 +136,8 @@ def resolve_split_dir(root: str | Path, split: str) -> Path:
     for c in cand:
         if c.is_dir():
             return c
-    present = sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+    present = sorted(p.name for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")) if root.is_dir() \
+        else []
     raise FileNotFoundError(
         f"split {split!r} not found: tried {', '.join(str(c) for c in cand)}; "
         + (f"splits present under {root}: {present}" if root.is_dir() else f"{root} does not exist")

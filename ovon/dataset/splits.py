@@ -9,8 +9,10 @@ category so the split can be audited. Paper ranges: synonyms [0.68, 0.96], unsee
 
 from __future__ import annotations
 
+import difflib
 import json
-from collections.abc import Iterable, Sequence
+from collections import Counter
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,7 +40,11 @@ class SplitConfig:
     seed: int = in_range(0, 0, 2**32 - 1)
     # share of categories sampled as unseen candidates
     holdout_fraction: float = in_range(0.25, 0.0, 1.0, lo_open=True, hi_open=True)
-    similarity_threshold: float = in_range(0.68, -1.0, 1.0)  # max cosine to train >= this -> val_seen_synonyms
+    # max cosine to train >= this -> val_seen_synonyms. (0, 1): a held-out name's highest MiniLM similarity
+    # to the train names lies well inside (0, 1) in practice (paper: unseen 0.45-0.68, synonyms 0.68-0.96;
+    # ours 0.40-0.93), so a threshold <= 0 sends every held-out category to val_seen_synonyms and one of 1
+    # every one to val_unseen (only an exact duplicate reaches 1): an empty split either way
+    similarity_threshold: float = in_range(0.68, 0.0, 1.0, lo_open=True, hi_open=True)
     val_scene_fraction: float = in_range(0.2, 0.0, 1.0, lo_open=True, hi_open=True)  # paper: 36 of 181 scenes
     model: str = non_empty(MODEL_NAME)
 
@@ -125,7 +131,97 @@ class CategorySplit:
         return write_json(path, self.to_json())
 
 
-def load_category_split(path: str | Path) -> CategorySplit:
+CATEGORY_LISTS: tuple[str, ...] = ("train", *HELD_OUT_SPLITS)  # the lists of a categories.json
+SPLITS_FIX = "or write a new file with `ovon dataset splits`"
+
+
+def _shown(names: Sequence[str], n: int = 5) -> str:
+    """The first `n` names, quoted, and how many more."""
+    head = ", ".join(repr(c) for c in names[:n])
+    return head + (f" and {len(names) - n} more" if len(names) > n else "")
+
+
+def _categories_word(n: int) -> str:
+    return "category" if n == 1 else "categories"
+
+
+def _vocabulary_names() -> set[str]:
+    from ovon.scenes.vocabulary import load_vocabulary
+
+    return set(load_vocabulary().names)
+
+
+def check_category_split(
+    split: CategorySplit,
+    source: str = "categories.json",
+    *,
+    known: Collection[str] | None = None,
+    splits: Iterable[str] = (),
+) -> CategorySplit:
+    """Refuse a category split whose lists break the HM3D-OVON split rules, before any work; returns it.
+
+    Why: a categories.json is read as given (`--categories`, or one left in an output folder), and a bad
+    one used to generate silently wrong or empty splits (train categories in val_unseen: "unseen"
+    episodes of trained categories; unknown names: splits that `dataset validate` then rejects as empty,
+    or an error blaming the scenes). One line naming `source`, the list and the offending categories:
+
+    - no category twice in a list;
+    - val_seen_synonyms and val_unseen disjoint from train (held-out categories are never trained on;
+      val_seen is train's categories on val scenes, docs/spec.md#category-split) and from each other;
+    - every name in `known` (default: the embedded vocabulary, from which scene labels are cleaned: any
+      other name can never match an annotated object);
+    - train non-empty (the held-out lists are held out from it, val_seen uses it), and the list of every
+      split in `splits` (those being generated) non-empty.
+    """
+    lists = {"train": list(split.train), **{k: [h.category for h in split.held_out(k)] for k in HELD_OUT_SPLITS}}
+    fix = f"fix: edit that list in {source}, {SPLITS_FIX}"
+    for key, names in lists.items():
+        twice = sorted(c for c, n in Counter(names).items() if n > 1)
+        if twice:
+            raise DatasetError(f"{source}: {key} lists {_shown(twice)} more than once; expected each category once "
+                               f"per list; fix: remove the repeats from {key}")
+    rules = (
+        ("val_unseen", "train", "val_unseen disjoint from train (unseen categories are never trained on)"),
+        ("val_seen_synonyms", "train", "val_seen_synonyms disjoint from train (held-out synonyms of train "
+                                       "categories are never trained on)"),
+        ("val_unseen", "val_seen_synonyms", "the held-out lists disjoint (a held-out category is a synonym of "
+                                            "a train category or unseen, not both)"),
+    )
+    for key, other, expected in rules:
+        both = [c for c in lists[key] if c in set(lists[other])]
+        if both:
+            raise DatasetError(f"{source}: {key} lists {len(both)} {other} {_categories_word(len(both))} "
+                               f"({_shown(both)}); expected {expected}; fix: remove them from {key} or from "
+                               f"{other}, {SPLITS_FIX}")
+    vocabulary = known is None
+    names_known = _vocabulary_names() if known is None else set(known)
+    for key, names in lists.items():
+        unknown = [c for c in names if c not in names_known]
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], sorted(names_known), n=1, cutoff=0.8)
+            hint = f" (did you mean {close[0]!r} for {unknown[0]!r}?)" if close else ""
+            where = "the embedded vocabulary (`ovon scenes vocabulary` lists it)" if vocabulary else "the known ones"
+            raise DatasetError(f"{source}: {key} names {len(unknown)} {_categories_word(len(unknown))} that "
+                               f"{'is' if len(unknown) == 1 else 'are'} not in the "
+                               f"{'vocabulary' if vocabulary else 'known categories'} ({_shown(unknown)}){hint}; "
+                               f"expected category names of {where}: no annotated object can match them; "
+                               f"fix: correct or remove them, {SPLITS_FIX}")
+    # train and val_seen episodes draw from the train list, the held-out splits from their own
+    needed = dict.fromkeys(["train", *(k if k in HELD_OUT_SPLITS else "train" for k in map(canonical_split, splits))])
+    for key in needed:
+        if not lists[key]:
+            why = ("the held-out categories are held out from train and val_seen uses its categories"
+                   if key == "train" else f"the {key} split would get no episode")
+            raise DatasetError(f"{source}: {key} is empty ({why}); expected at least one category in {key}; "
+                               f"{fix}")
+    return split
+
+
+def load_category_split(
+    path: str | Path, *, known: Collection[str] | None = None, splits: Iterable[str] = ()
+) -> CategorySplit:
+    """Read a categories.json and check its lists (`check_category_split`: disjoint where the paper
+    requires, known names, train and the lists of `splits` non-empty); one line naming the file if not."""
     path = Path(path)
     fix = "fix: pass a categories.json written by `ovon dataset splits`"
     try:
@@ -134,7 +230,37 @@ def load_category_split(path: str | Path) -> CategorySplit:
         raise DatasetError(f"{path}: not valid JSON ({type(e).__name__}); {fix}") from None
     if not isinstance(doc, dict):
         raise DatasetError(f"{path}: expected a JSON object with train / val_seen_synonyms / val_unseen; {fix}")
-    return CategorySplit.from_json(doc, source=str(path))
+    for key in CATEGORY_LISTS:
+        if key in doc and not isinstance(doc[key], list):
+            raise DatasetError(f"{path}: malformed category split: {key} = {str(doc[key])[:60]!r}: expected a list "
+                               f"of categories; {fix}")
+    split = CategorySplit.from_json(doc, source=str(path))
+    return check_category_split(split, str(path), known=known, splits=splits)
+
+
+def empty_held_out_problem(split: CategorySplit, n_categories: int, holdout: float | None = None) -> str | None:
+    """Why a split just computed by `split_categories` would leave a held-out split empty, naming the
+    option to change (`--holdout`, `--threshold`) and a value that works; None when both lists have
+    categories. Why: an empty val_seen_synonyms or val_unseen gives a dataset whose split `dataset
+    validate` rejects, after the whole generation."""
+    held = sorted([*split.val_seen_synonyms, *split.val_unseen], key=lambda h: h.max_similarity)
+    if len(held) < 2:
+        given = f" {holdout:g}" if holdout is not None else ""
+        return (f"--holdout{given} holds out {len(held)} of the {n_categories} categories; expected at least 2 "
+                "(one for val_seen_synonyms, one for val_unseen); fix: pass a larger --holdout (default 0.25)")
+    empty = "val_unseen" if not split.val_unseen else ("val_seen_synonyms" if not split.val_seen_synonyms else "")
+    if not empty:
+        return None
+    sims = sorted({h.max_similarity for h in held})
+    full = "val_seen_synonyms" if empty == "val_unseen" else "val_unseen"
+    span = f"their highest similarity to a train category lies in [{sims[0]:g}, {sims[-1]:g}]"
+    if len(sims) < 2:
+        fix = "another --seed or --holdout (every held-out category has the same similarity)"
+    else:
+        good = 0.68 if sims[0] < 0.68 <= sims[-1] else sims[len(sims) // 2]
+        fix = f"a --threshold above {sims[0]:g} and at most {sims[-1]:g}, e.g. --threshold {good:g}"
+    return (f"--threshold {split.threshold:g} puts all {len(held)} held-out categories in {full} ({span}), so "
+            f"{empty} would be empty; expected a threshold inside that range; fix: pass {fix}")
 
 
 def split_categories(

@@ -10,18 +10,22 @@ the observation of oracle agents, experts and oracle encoders.
 from __future__ import annotations
 
 import math
+import re
+import reprlib
 import string
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from ovon.config.base import merge, parse_overrides
+from ovon.config.base import ConfigError, from_dict, merge, parse_overrides, validate
 from ovon.config.sim import SimConfig
 from ovon.config.task import TaskConfig
 from ovon.scenes.model import Scene
-from ovon.sim.agent import STOP, Kinematics, Odometry
+from ovon.sim.agent import ACTION_NAMES, STOP, Kinematics, Odometry
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState, Frame
 from ovon.sim.world import World, acquire_world
@@ -32,6 +36,48 @@ from ovon.task.tracker import EpisodeTracker
 GOAL_CHARSET = string.ascii_letters + string.digits + " -_'/&().,"
 MAX_GOAL_LEN = 64
 ODOMETRY_LIMIT_M = 1000.0  # bound of the odometry Box (any building fits; check_env wants finite bounds)
+RESET_OPTIONS = ("episode",)  # the keys reset(options=...) reads
+
+C = TypeVar("C")
+
+
+def _shown(value: Any) -> str:
+    """A value for a one-line message (long reprs, e.g. of arrays, shortened)."""
+    return " ".join(reprlib.repr(value).split())
+
+
+def _config(value: C | Mapping[str, Any] | None, cls: type[C], name: str) -> C:
+    """`sim=` / `task=` as a validated config: None (the defaults), an instance of `cls`, or a mapping of
+    its fields (partial: the rest default). Checked here because an out-of-domain value built in Python
+    (a negative success distance, a 0 deg field of view) otherwise fails much later, or never."""
+    if value is None:
+        return cls()
+    try:
+        if isinstance(value, cls):
+            return validate(value, name)
+        if isinstance(value, Mapping):
+            return from_dict(cls, value, name)
+    except ConfigError as e:  # the fix in Python terms, not the command line's `--set KEY=VALUE`
+        msg = re.sub(r"--set ([\w.]+)=VALUE with VALUE", r"set \1 to", str(e))
+        msg = msg.replace("fix: --set the values", "fix: set the values")
+        raise ConfigError(msg if "fix:" in msg else f"{msg}; fix: use only these keys") from None
+    raise ConfigError(f"{name} = {_shown(value)}: expected a {cls.__name__} or a mapping of its fields; fix: pass "
+                      f"{name}={cls.__name__}(...) or {name}={{...}} with its keys")
+
+
+def _start_pose(start: Any) -> tuple[float, float, float, float] | None:
+    """`start=` as (x, y, z, yaw_deg) floats, refused unless 4 finite numbers (whether it lies on the
+    navigable map is checked at reset, once the scene is loaded: `ovon.task.setup.check_start`)."""
+    if start is None:
+        return None
+    ok = (isinstance(start, Sequence | np.ndarray) and not isinstance(start, str) and len(start) == 4
+          and all(isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool) for v in start)
+          and all(math.isfinite(float(v)) for v in start))
+    if not ok:
+        raise ValueError(f"start = {_shown(start)}: expected 4 finite numbers (x, y, z in m, yaw in degrees); "
+                         "fix: pass e.g. start=(3.0, 0.0, 2.0, 90.0) with x, z on the scene's navigable floor, "
+                         "or leave it out for a random start")
+    return tuple(float(v) for v in start)  # type: ignore[return-value]
 
 
 @dataclass
@@ -51,6 +97,10 @@ class Privileged:
 
 
 class ObjectNavEnv(gym.Env):
+    """`sim` / `task`: a config, a mapping of its fields, or None (defaults); `overrides`: `key=value`
+    strings under `sim.` / `task.` applied on top; `start`: (x, y, z, yaw_deg) of ad-hoc episodes.
+    Every argument is checked here, before a scene is loaded (one-line ValueError / ConfigError)."""
+
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(
@@ -58,18 +108,30 @@ class ObjectNavEnv(gym.Env):
         scene: str | Scene | None = None,
         goal: str | None = None,
         episodes: list[EpisodeSpec] | None = None,
-        sim: SimConfig | None = None,
-        task: TaskConfig | None = None,
+        sim: SimConfig | Mapping[str, Any] | None = None,
+        task: TaskConfig | Mapping[str, Any] | None = None,
         overrides: list[str] | tuple[str, ...] = (),
         start: tuple[float, float, float, float] | None = None,
         render_mode: str | None = "rgb_array",
     ):
-        sim = sim or SimConfig()
-        task = task or TaskConfig()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode = {_shown(render_mode)}: expected None or one of "
+                             f"{self.metadata['render_modes']} (ObjectNavEnv.metadata['render_modes']); fix: pass "
+                             "render_mode='rgb_array' and display the frames env.render() returns")
+        sim = _config(sim, SimConfig, "sim")
+        task = _config(task, TaskConfig, "task")
+        if isinstance(overrides, str) or not isinstance(overrides, Sequence):
+            raise ConfigError(f"overrides = {_shown(overrides)}: expected a list of 'key=value' strings; fix: pass "
+                              "e.g. overrides=['sim.camera.width=160']")
         if overrides:
             data = parse_overrides(list(overrides))
-            sim = merge(sim, data.get("sim", {}), "sim") if "sim" in data else sim
-            task = merge(task, data.get("task", {}), "task") if "task" in data else task
+            unknown = sorted(set(data) - {"sim", "task"})
+            if unknown:
+                raise ConfigError(f"overrides = {_shown(list(overrides))}: unknown group(s) {', '.join(unknown)}; "
+                                  "expected keys under sim. or task.; fix: e.g. overrides=['sim.camera.width=160']")
+            sim = merge(sim, data["sim"], "sim") if "sim" in data else sim
+            task = merge(task, data["task"], "task") if "task" in data else task
+        start = _start_pose(start)
         if scene is None and not episodes:
             raise ValueError("ObjectNavEnv needs scene=PATH_OR_ID (+ goal=CATEGORY) or episodes=[EpisodeSpec]")
         self.sim_cfg, self.task_cfg = sim, task
@@ -87,6 +149,7 @@ class ObjectNavEnv(gym.Env):
         self.observation_space = spaces.Dict(observation_spaces(sim, task))
         self.action_space = spaces.Discrete(6)
         self.spec_episode: EpisodeSpec | None = None
+        self._has_episode = False  # False before the first reset and after a failed one
 
     # -- episode set-up -------------------------------------------------------------------------
     def _world_for(self, scene: str) -> World:
@@ -116,7 +179,10 @@ class ObjectNavEnv(gym.Env):
         )
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if options is not None:
+            _check_options(options)  # before the seed: a refused call changes nothing
         super().reset(seed=seed)
+        self._has_episode = False
         spec = self._next_spec(options)
         if len(spec.goal_category) > MAX_GOAL_LEN:
             raise ValueError(f"goal text longer than {MAX_GOAL_LEN} characters: {spec.goal_category!r}")
@@ -130,6 +196,7 @@ class ObjectNavEnv(gym.Env):
         self._frame = self._render()
         self._tracker.reset(self._state.position, self._frame.semantic, self._state.yaw)
         odo = self._odometry.reset(self._state)
+        self._has_episode = True
         return self._obs(odo), {"episode_id": spec.episode_id}
 
     # -- stepping -------------------------------------------------------------------------------
@@ -155,10 +222,24 @@ class ObjectNavEnv(gym.Env):
             obs["pointgoal"] = point_goal_vector(odometry, self._point_goal)
         return obs
 
+    def _action_id(self, action: Any) -> int:
+        """The action as an int, refused unless an integer of the action space. Gymnasium's `Discrete`
+        takes a Python int, a numpy integer or a 0-d integer array (what `sample()` and a policy's
+        `argmax().item()` give); `int(action)` would turn 1.7 into MOVE_FORWARD and "1" into an action."""
+        value = action[()] if isinstance(action, np.ndarray) and action.ndim == 0 else action
+        space = self.action_space
+        if isinstance(value, int | np.integer) and not isinstance(value, bool):
+            if space.start <= int(value) < space.start + space.n:
+                return int(value)
+        last = int(space.start) + int(space.n) - 1
+        names = ", ".join(f"{int(space.start) + i}={n}" for i, n in enumerate(ACTION_NAMES))
+        raise ValueError(f"action = {_shown(action)} ({type(action).__name__}): expected an integer in "
+                         f"{space.start}..{last} of action_space {space} ({names}); fix: pass a Python int, a "
+                         "numpy integer or a 0-d integer array, e.g. action_space.sample() or logits.argmax().item()")
+
     def step(self, action):
-        action = int(action)
-        if not self.action_space.contains(action):
-            raise ValueError(f"action {action!r} is not in 0..5")
+        action = self._action_id(action)
+        self._require_reset("step")
         if self._tracker.done:
             raise RuntimeError("step() after the episode ended: call reset()")
         result = self._kin.step(self._state, action, self.np_random)
@@ -175,11 +256,19 @@ class ObjectNavEnv(gym.Env):
             info["metrics"] = self._tracker.metrics().to_dict()
         return self._obs(odo, result.collided), reward, terminated, truncated, info
 
+    def _require_reset(self, method: str) -> None:
+        """Gymnasium's order (`ResetNeeded`): no episode state exists before the first reset."""
+        if not self._has_episode:
+            raise gym.error.ResetNeeded(f"{method}() without an episode: reset() was not called, or the last one "
+                                        "failed; fix: call reset() (with a valid episode) first")
+
     def render(self):
+        self._require_reset("render")
         return self._frame.rgb
 
     def privileged(self) -> Privileged:
         """The one channel to ground truth (experts, oracles, failure analysis, recording)."""
+        self._require_reset("privileged")
         return Privileged(
             self._state.copy(), self._grid, self._field, self._viewpoints,
             self._tracker.goal_ids, self._frame, self._world, float(self._tracker.distance),
@@ -194,6 +283,21 @@ class ObjectNavEnv(gym.Env):
         if self._world is not None:
             self._world.close()
             self._world = None
+
+
+def _check_options(options: Any) -> None:
+    """reset(options=...): None or a dict of known keys; a misspelt key would silently start an ad-hoc
+    episode instead of the one given."""
+    if not isinstance(options, Mapping):
+        raise ValueError(f"options = {_shown(options)}: expected None or a dict with keys from "
+                         f"{list(RESET_OPTIONS)}; fix: pass options={{'episode': EpisodeSpec(...)}} or leave it out")
+    unknown = sorted(map(str, set(options) - set(RESET_OPTIONS)))
+    if unknown:
+        raise ValueError(f"options = {_shown(dict(options))}: unknown key(s) {', '.join(map(repr, unknown))}, expected "
+                         f"keys from {list(RESET_OPTIONS)}; fix: pass options={{'episode': EpisodeSpec(...)}}")
+    if "episode" in options and not isinstance(options["episode"], EpisodeSpec):
+        raise ValueError(f"options['episode'] = {_shown(options['episode'])}: expected an EpisodeSpec; fix: pass "
+                         "options={'episode': EpisodeSpec(...)} (e.g. one of ovon.dataset.io's episodes)")
 
 
 def observation_spaces(sim: SimConfig, task: TaskConfig | None = None) -> dict[str, spaces.Space]:

@@ -95,6 +95,10 @@ class EpisodeSampler(gym.Wrapper):
         return self.episodes[self.spec_index]
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        if options:  # silently sampling another episode than the one asked for would be a wrong result
+            raise ValueError(f"reset(options={sorted(options)}): this env samples its own episodes; fix: build "
+                             "the env stack with sample_episodes=False to choose each episode with "
+                             "options={'episode': ...}")
         if seed is not None:
             self.rng = np.random.default_rng(seed)
             self.scene, self.remaining = None, 0

@@ -109,8 +109,14 @@ def split_episodes(specs: Sequence[EpisodeSpec], n: int) -> list[list[EpisodeSpe
 def make_vector_env(recipe: EnvRecipe, num_envs: int, workers: int = 0, base_seed: int = 0):
     """`num_envs` copies of `recipe` on `workers` processes; with an episode list, env i samples from its
     share of the episodes (`split_episodes`) with seed `base_seed * 10007 + i`."""
+    from ovon.config.base import validate
     from ovon.env.vector import ObjectNavVectorEnv
 
+    if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+        raise ValueError(f"num_envs = {num_envs!r}: expected an integer >= 1; fix: e.g. num_envs=4")
+    # checked here, before a worker is started (each env checks them again when built)
+    validate(recipe.sim, "sim")
+    validate(recipe.task, "task")
     recipes = []
     parts = split_episodes(recipe.episodes, num_envs) if recipe.episodes else [None] * num_envs
     for i, part in enumerate(parts):

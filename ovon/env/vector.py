@@ -15,15 +15,22 @@ Extra methods: `call(name, *args)` calls a method of every env (e.g. `get_state`
 args)` with one argument per env; `set_state(states)` restores envs and returns their observations.
 `workers=0` hosts all envs in this process through the same code path (tests, debugging).
 Workers run single-threaded (`ovon.parallel.init_worker`) and die with their parent.
+
+Arguments (seeds, options, actions) are checked before any command is sent, and every command sent
+is answered before the call returns or raises: one bad call cannot leave a reply in a pipe for the next
+call to read. A call interrupted between the two (Ctrl-C) or a dead worker leaves the env unusable,
+and every later call says so; a closed env says it is closed.
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
+import reprlib
 import signal
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from multiprocessing import shared_memory
+from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 import gymnasium as gym
@@ -34,6 +41,7 @@ from gymnasium.vector.utils import batch_space
 
 EnvFn = Callable[[], gym.Env]
 PRIVATE_INFO = ("privileged",)  # info keys that never cross a process boundary
+COMMANDS = ("reset", "step", "call", "call_obs")  # the `_Host` methods a worker serves
 
 
 class WorkerError(RuntimeError):
@@ -42,6 +50,20 @@ class WorkerError(RuntimeError):
     def __init__(self, message: str, details: str = "") -> None:
         super().__init__(message)
         self.details = details
+
+
+class VectorEnvClosedError(gym.error.ClosedEnvironmentError, ValueError):
+    """A call on a closed vector env: Gymnasium's error for it, and a ValueError as Python's own for I/O on
+    a closed file."""
+
+
+def _shown(value: Any) -> str:
+    """A value for a one-line message (long reprs, e.g. of arrays, shortened)."""
+    return " ".join(reprlib.repr(value).split())
+
+
+def _seed_int(s: Any) -> bool:
+    return isinstance(s, int | np.integer) and not isinstance(s, bool | np.bool_) and s >= 0
 
 
 def _array_keys(space: spaces.Dict) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
@@ -115,6 +137,17 @@ class _Host:
     def call(self, name: str, args: Sequence[tuple]) -> list:
         return [getattr(env, name)(*a) for env, a in zip(self.envs, args)]
 
+    def run(self, cmd: str, args: tuple) -> Any:
+        """`cmd` (one of COMMANDS) with `args`. When it raises, the text observations are forgotten so that
+        the next reply sends them all: the parent discards the failed call's changes."""
+        if cmd not in COMMANDS:
+            raise ValueError(f"unknown vector env command {cmd!r}")
+        try:
+            return getattr(self, cmd)(*args)
+        except BaseException:
+            self.texts = [None] * len(self.envs)
+            raise
+
     def call_obs(self, name: str, args: Sequence[tuple]) -> tuple[list, dict]:
         """Call a method returning (obs, info) on every env and publish the observations."""
         infos, changed = [], {}
@@ -149,22 +182,14 @@ def _worker(conn, fns: Sequence[EnvFn], first: int) -> None:
                 conn.send(("ok", None))
                 break
             try:
-                if cmd == "step":
-                    result = host.step(arg)
-                elif cmd == "reset":
-                    result = host.reset(*arg)
-                elif cmd == "call":
-                    result = host.call(*arg)
-                elif cmd == "call_obs":
-                    result = host.call_obs(*arg)
-                elif cmd == "attach":  # the parent's shared-memory observation buffers
+                if cmd == "attach":  # the parent's shared-memory observation buffers
                     for k, (name, shape, dtype) in arg.items():
                         seg = shared_memory.SharedMemory(name=name)  # the parent unlinks it
                         segments.append(seg)
                         host.buffers[k] = np.ndarray(shape, dtype=dtype, buffer=seg.buf)
                     result = None
                 else:
-                    raise ValueError(f"unknown vector env command {cmd!r}")
+                    result = host.run(cmd, arg)
             except Exception as e:  # report the env's error to the parent, keep serving
                 conn.send(("error", (str(e).splitlines()[0] if str(e) else type(e).__name__,
                                      traceback.format_exc())))
@@ -192,17 +217,25 @@ class ObjectNavVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP}
 
     def __init__(self, env_fns: Sequence[EnvFn], workers: int = 0, context: str = "spawn", copy: bool = True):
-        if not env_fns:
-            raise ValueError("a vector env needs at least one env")
+        if not isinstance(env_fns, Sequence) or not env_fns or not all(callable(f) for f in env_fns):
+            raise ValueError(f"env_fns = {_shown(env_fns)}: expected a non-empty list of functions that make an env; "
+                             "fix: e.g. [functools.partial(build_env, recipe)] * n")
+        if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 0:
+            raise ValueError(f"workers = {_shown(workers)}: expected an integer >= 0 (0 = every env in this "
+                             "process); fix: e.g. workers=0, or workers=2 for two worker processes")
+        if context not in mp.get_all_start_methods():
+            raise ValueError(f"context = {_shown(context)}: expected one of {mp.get_all_start_methods()}; fix: "
+                             "leave it out (spawn)")
         self.num_envs = len(env_fns)
         self.copy = copy
-        workers = max(0, min(int(workers), self.num_envs))
+        workers = min(int(workers), self.num_envs)  # more workers than envs would idle
         self._segments: list[shared_memory.SharedMemory] = []
         self._conns: list[Any] = []
         self._procs: list[Any] = []
         self._blocks: list[range] = []
         self._local: _Host | None = None
         self._buffers: dict[str, np.ndarray] = {}
+        self._broken: str | None = None  # why the workers' pipes can no longer be trusted
         try:
             if workers == 0:
                 self._local = _Host(env_fns, 0, self._buffers)
@@ -253,16 +286,68 @@ class ObjectNavVectorEnv(VectorEnv):
         return [self._recv(c) for c in self._conns][0]
 
     # -- transport ----------------------------------------------------------------------------------
-    @staticmethod
-    def _recv(conn) -> Any:
+    def _recv(self, conn) -> Any:
+        """One reply; a worker's error as WorkerError (its one-line message, the traceback in `details`)."""
         try:
             status, payload = conn.recv()
         except (EOFError, ConnectionResetError):
-            raise WorkerError("an env worker process died (killed, or out of memory)") from None
+            self._broken = "an env worker process died (killed, or out of memory)"
+            raise WorkerError(self._broken) from None
         if status != "ok":
             msg, details = payload
             raise WorkerError(msg, details)
         return payload
+
+    def _check_usable(self) -> None:
+        """Refuse a call on a closed env, or on one whose workers may still owe a reply."""
+        if self.closed:
+            raise VectorEnvClosedError("the vector env is closed; fix: make a new one (close() ended its envs)")
+        if self._broken:
+            raise WorkerError(f"the vector env is unusable: {self._broken}; fix: close() it and make a new one")
+
+    def _run(self, cmd: str, block_args: Callable[[range], tuple], texts_at: int | None) -> list:
+        """`cmd` on every block of envs, `block_args(block)` its arguments; the blocks' results in env order.
+
+        Every message is pickled before the first is sent (an unpicklable argument sends nothing) and every
+        reply is read before an env's error is raised, so the pipes stay in step; the text changes at index
+        `texts_at` of the blocks that succeeded are applied either way."""
+        self._check_usable()
+        if self._local is not None:
+            results = [self._local.run(cmd, block_args(range(self.num_envs)))]
+        else:
+            try:
+                messages = [ForkingPickler.dumps((cmd, block_args(b))) for b in self._blocks]
+            except Exception as e:  # noqa: BLE001 - any pickling error
+                why = f"{type(e).__name__}: {str(e).splitlines()[0]}" if str(e) else type(e).__name__
+                raise ValueError(f"{cmd}: its arguments cannot be sent to the env worker processes ({why}); fix: "
+                                 "pass picklable values, or workers=0") from None
+            results, error, done = [], None, False
+            try:
+                for conn, msg in zip(self._conns, messages):
+                    try:
+                        conn.send_bytes(msg)
+                    except OSError:  # a broken pipe: the worker is gone
+                        self._broken = "an env worker process died (killed, or out of memory)"
+                        raise WorkerError(self._broken) from None
+                for conn in self._conns:
+                    try:
+                        results.append(self._recv(conn))
+                    except WorkerError as e:
+                        results.append(None)
+                        error = error or e
+                done = True
+            finally:
+                if not done and not self._broken:
+                    self._broken = f"a {cmd} call was interrupted before every worker answered"
+            if error is not None:
+                for r in results:
+                    if r is not None and texts_at is not None:
+                        self._apply_texts(r[texts_at])
+                raise error
+        if texts_at is not None:
+            for r in results:
+                self._apply_texts(r[texts_at])
+        return results
 
     def _obs(self) -> dict[str, Any]:
         obs: dict[str, Any] = {k: (b.copy() if self.copy else b) for k, b in self._buffers.items()}
@@ -282,42 +367,63 @@ class ObjectNavVectorEnv(VectorEnv):
                 infos = self._add_info(infos, info, i)
         return infos
 
+    # -- argument checks (before anything is sent) ----------------------------------------------------
+    def _seeds(self, seed: Any) -> list[int | None]:
+        """Gymnasium's convention: None, an int (env i gets seed + i) or one int (or None) per env."""
+        n = self.num_envs
+        if isinstance(seed, np.ndarray) and seed.ndim == 0:
+            seed = seed[()]
+        if seed is None:
+            return [None] * n
+        if _seed_int(seed):
+            return [int(seed) + i for i in range(n)]
+        if (isinstance(seed, Sequence | np.ndarray) and not isinstance(seed, str | bytes) and np.ndim(seed) == 1
+                and len(seed) == n and all(s is None or _seed_int(s) for s in seed)):
+            return [None if s is None else int(s) for s in seed]
+        raise ValueError(f"seed = {_shown(seed)}: expected None, an integer >= 0 (env i gets seed + i) or a sequence "
+                         f"of {n} integers >= 0 or None (one per env); fix: e.g. seed=0 or seed=list(range({n}))")
+
+    def _actions(self, actions: Any) -> list:
+        """One valid action per env (a Discrete space: ints of the space, floats and bools refused as by
+        Gymnasium's `Discrete`); a wrong count or value would step the wrong envs or fail in a worker."""
+        n, space = self.num_envs, self.single_action_space
+        try:
+            arr = np.asarray(actions)
+        except Exception:  # noqa: BLE001 - e.g. a CUDA tensor
+            arr = np.asarray(None)
+        if isinstance(space, spaces.Discrete):
+            lo, hi = int(space.start), int(space.start) + int(space.n) - 1
+            if arr.shape == (n,) and arr.dtype.kind in "iu" and ((arr >= lo) & (arr <= hi)).all():
+                return [int(a) for a in arr]
+            expected = f"{n} integers in {lo}..{hi} (one per env; single_action_space {space})"
+        else:
+            if arr.dtype != object and len(arr.shape) and arr.shape[0] == n and self.action_space.contains(arr):
+                return list(arr)
+            expected = f"an array of {n} actions (one per env) in action_space {self.action_space}"
+        got = f"shape {arr.shape}, dtype {arr.dtype}" if arr.dtype != object else type(actions).__name__
+        raise ValueError(f"actions = {_shown(actions)} ({got}): expected {expected}; fix: pass e.g. "
+                         "vec.action_space.sample() or a policy's actions as a CPU integer array")
+
     # -- Gymnasium API ------------------------------------------------------------------------------
     def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict | None = None):
-        if seed is None or isinstance(seed, int):
-            seeds = [None if seed is None else seed + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-        infos: list[dict | None] = []
-        if self._local is not None:
-            per, changed = self._local.reset(seeds, options)
-            infos, changes = per, [changed]
-        else:
-            for conn, block in zip(self._conns, self._blocks):
-                conn.send(("reset", ([seeds[i] for i in block], options)))
-            changes = []
-            for c in self._conns:
-                per, changed = self._recv(c)
-                infos += per
-                changes.append(changed)
-        for ch in changes:
-            self._apply_texts(ch)
-        return self._obs(), self._infos(infos)
+        """Reset every env: `seed` None, an int (env i gets seed + i) or one per env; `options` (None or a
+        dict) goes to every env."""
+        self._check_usable()
+        seeds = self._seeds(seed)
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(f"options = {_shown(options)}: expected None or a dict (given to every env's reset); "
+                             "fix: e.g. options={'episode': EpisodeSpec(...)} or leave it out")
+        results = self._run("reset", lambda b: ([seeds[i] for i in b], options), texts_at=1)
+        return self._obs(), self._infos([i for r in results for i in r[0]])
 
     def step(self, actions):
-        acts = list(np.asarray(actions).reshape(self.num_envs, *np.shape(actions)[1:]))
-        if self._local is not None:
-            results = [self._local.step(acts)]
-        else:
-            for conn, block in zip(self._conns, self._blocks):
-                conn.send(("step", [acts[i] for i in block]))
-            results = [self._recv(c) for c in self._conns]
+        self._check_usable()
+        acts = self._actions(actions)
+        results = self._run("step", lambda b: ([acts[i] for i in b],), texts_at=4)
         rewards = np.concatenate([r[0] for r in results])
         terms = np.concatenate([r[1] for r in results])
         truncs = np.concatenate([r[2] for r in results])
         infos = [i for r in results for i in r[3]]
-        for r in results:
-            self._apply_texts(r[4])
         return self._obs(), rewards, terms, truncs, self._infos(infos)
 
     def call(self, name: str, *args: Any) -> tuple:
@@ -325,33 +431,26 @@ class ObjectNavVectorEnv(VectorEnv):
         return self.call_each(name, [args] * self.num_envs)
 
     def call_each(self, name: str, args: Sequence[tuple]) -> tuple:
-        if len(args) != self.num_envs:
-            raise ValueError(f"call_each needs {self.num_envs} argument tuples, got {len(args)}")
-        if self._local is not None:
-            return tuple(self._local.call(name, args))
-        for conn, block in zip(self._conns, self._blocks):
-            conn.send(("call", (name, [args[i] for i in block])))
-        return tuple(x for c in self._conns for x in self._recv(c))
+        """`getattr(env, name)(*args[i])` on env i; results in env order."""
+        self._check_usable()
+        if (not isinstance(name, str) or not isinstance(args, Sequence) or len(args) != self.num_envs
+                or not all(isinstance(a, tuple | list) for a in args)):
+            raise ValueError(f"call_each({_shown(name)}, {_shown(args)}): expected a method name and "
+                             f"{self.num_envs} argument tuples (one per env); fix: e.g. call_each('set_state', "
+                             f"[(s,) for s in states])")
+        args = [tuple(a) for a in args]
+        return tuple(x for r in self._run("call", lambda b: (name, [args[i] for i in b]), None) for x in r)
 
     def set_state(self, states: Sequence[Any]):
         """Restore every env's `set_state(state)`; returns the observations and infos reached."""
-        if len(states) != self.num_envs:
-            raise ValueError(f"saved env state has {len(states)} envs, this vector env has {self.num_envs}")
+        self._check_usable()
+        if not isinstance(states, Sequence) or len(states) != self.num_envs:
+            got = f"{len(states)} env states" if isinstance(states, Sequence) else _shown(states)
+            raise ValueError(f"states = {got}: expected {self.num_envs} env states (one per env, as get_state() "
+                             f"returns them); fix: restore states saved from a vector env of {self.num_envs} envs")
         args = [(s,) for s in states]
-        if self._local is not None:
-            per, changed = self._local.call_obs("set_state", args)
-            infos, changes = per, [changed]
-        else:
-            for conn, block in zip(self._conns, self._blocks):
-                conn.send(("call_obs", ("set_state", [args[i] for i in block])))
-            infos, changes = [], []
-            for c in self._conns:
-                per, changed = self._recv(c)
-                infos += per
-                changes.append(changed)
-        for ch in changes:
-            self._apply_texts(ch)
-        return self._obs(), self._infos(infos)
+        results = self._run("call_obs", lambda b: ("set_state", [args[i] for i in b]), texts_at=1)
+        return self._obs(), self._infos([i for r in results for i in r[0]])
 
     def get_state(self) -> list:
         return list(self.call("get_state"))

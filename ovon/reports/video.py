@@ -18,7 +18,7 @@ import cv2
 import imageio.v2 as imageio
 import numpy as np
 
-from ovon.atomic import check_output_path
+from ovon.atomic import atomic_write_path, check_output_path
 from ovon.config.base import from_dict
 from ovon.config.sim import SimConfig
 from ovon.config.task import TaskConfig
@@ -234,16 +234,12 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
     last = frames[-1].copy()
     cv2.putText(last, verdict, (8, 60), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 0, 0), 2, cv2.LINE_AA)
     frames += [last] * fps
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.stem}.tmp{out.suffix}")
     # even sizes for yuv420p
     hh, ww = (frames[0].shape[0] // 2) * 2, (frames[0].shape[1] // 2) * 2
-    try:
+
+    def encode(tmp: Path) -> None:
         with imageio.get_writer(tmp, fps=fps, codec="libx264", macro_block_size=1) as w:
             for f in frames:
                 w.append_data(np.ascontiguousarray(f[:hh, :ww]))
-        tmp.replace(out)
-    except BaseException:
-        tmp.unlink(missing_ok=True)  # no half-written video left beside the old one
-        raise
-    return out
+
+    return atomic_write_path(out, encode)  # no half-written video left beside the old one

@@ -29,6 +29,7 @@ _ADHOC = LRU(CACHE_SIZE)  # (grid uids, goal object ids) -> (grid, points, viewp
 # goal sets thousands of times and rebuilding the list cost ~0.05 ms per PPO step. Keyed by the world itself
 # (weakly), not by its grids: worlds of the same geometry share grids but may hold other objects.
 _DISTRACTORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+START_HEIGHT_TOLERANCE_M = 0.5  # a given start's y may differ this much from its floor's surface
 
 
 @dataclass
@@ -53,12 +54,11 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
     if task.kind == "pointnav":
         return _prepare_point(world, spec, rng, task)
     objs = goal_instances(world.scene, spec)
-    if spec.start_position is not None:
-        start_pos = np.asarray(spec.start_position, dtype=np.float64)
+    start_pos = check_start(world, spec)
+    if start_pos is not None:
         grids = [world.nav.grid_for(start_pos)]
     else:
         # Random start: on the floor of a random viewpoint / goal object (a seeded choice).
-        start_pos = None
         anchors = [v.position for v in spec.viewpoints] or [o.aabb_min for o in objs]
         grids = []
         for i in rng.permutation(len(anchors)):
@@ -87,6 +87,42 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
                              object_distance_fn=lambda p: object_floor_distance(on_floor, p))
     state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
     return EpisodeSetup(state, grid, field, list(viewpoints), goal_ids, tracker)
+
+
+def check_start(world: World, spec: EpisodeSpec) -> np.ndarray | None:
+    """The spec's given start position as floats (None: a random start), refused (one-line ValueError
+    naming the episode and the value) unless it and the start yaw are finite and the position lies on
+    the navigable map of its floor, as the dataset validator requires (`ovon.dataset.validate.start_problem`):
+    off the map the agent renders from outside the building and the goal distance is inf, which no
+    metric reports."""
+    where = f"episode {spec.episode_id!r} in scene {spec.scene!r}"
+    yaw = spec.start_yaw
+    if yaw is not None and not (isinstance(yaw, int | float | np.integer | np.floating) and math.isfinite(yaw)):
+        raise ValueError(f"{where}: start yaw = {yaw!r}: expected a finite angle; fix: give a finite start yaw "
+                         "(ObjectNavEnv start=(x, y, z, yaw_deg)), or none for a random one")
+    if spec.start_position is None:
+        return None
+    try:
+        pos = np.asarray(spec.start_position, dtype=np.float64)
+    except (TypeError, ValueError):
+        pos = np.full(0, np.nan)
+    if pos.shape != (3,) or not np.isfinite(pos).all():
+        raise ValueError(f"{where}: start (x, y, z) = {spec.start_position!r}: expected 3 finite numbers; fix: give "
+                         "a start on the scene's navigable floor, or none for a random one")
+    shown = pos.round(3).tolist()
+    if not world.nav.floors:
+        raise ValueError(f"{where}: start {shown}: the scene has no navigable floor; fix: check the scene's mesh "
+                         "and the agent's size (sim.agent)")
+    grid = world.nav.grid_for(pos)
+    surface = grid.cell_to_world(*grid.world_to_cell(pos))[1]  # the floor's height there (nominal off the grid)
+    if not (grid.is_navigable(pos) and abs(pos[1] - surface) <= START_HEIGHT_TOLERANCE_M):
+        near = grid.snap(pos)  # nan when this floor has no navigable cell
+        hint = f"e.g. the nearest navigable point {near.round(3).tolist()}" if np.isfinite(near).all() else "elsewhere"
+        raise ValueError(f"{where}: start (x, y, z) = {shown} is not on the navigable map (floor {grid.floor}, "
+                         f"agent radius {world.nav.agent.radius} m); expected a navigable x, z with y within "
+                         f"{START_HEIGHT_TOLERANCE_M} m of that floor's surface; fix: start there, {hint}, or give "
+                         "no start for a random one")
+    return pos
 
 
 def _world_distractors(world: World, goal_categories: list[str]) -> list:
@@ -133,11 +169,15 @@ def _random_reachable_start(grid, field: DistanceField, rng: np.random.Generator
 
 def _prepare_point(world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig) -> EpisodeSetup:
     """A PointNav episode: the spec's start and single viewpoint (the goal point) when it has both, else a
-    pair sampled with `rng` (`ovon.task.pointgoal.sample_point_goal`); the goal field has one source."""
+    pair sampled with `rng` (`ovon.task.pointgoal.sample_point_goal`); the goal field has one source. A start
+    without a goal point is refused (it used to be replaced by a sampled one without a word)."""
     from ovon.task.pointgoal import goal_in_start_frame, sample_point_goal
 
-    if spec.start_position is not None and spec.viewpoints:
-        start = np.asarray(spec.start_position, dtype=np.float64)
+    start = check_start(world, spec)
+    if start is not None and not spec.viewpoints:
+        raise ValueError(f"episode {spec.episode_id!r}: a PointNav episode with a given start needs its goal point "
+                         "too (viewpoints[0]); fix: give both, or neither for a sampled pair")
+    if start is not None:
         grid = world.nav.grid_for(start)
         goal = np.asarray(spec.viewpoints[0].position, dtype=np.float64)
         field = distance_field(grid, goal[None])

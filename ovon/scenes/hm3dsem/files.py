@@ -127,7 +127,7 @@ def list_scenes(dataset_dir: str | Path, split: str | None = None) -> list[Path]
     if split is not None:
         split_dirs = [root / split]
         if not split_dirs[0].is_dir():
-            have = sorted(d.name for d in root.iterdir() if d.is_dir())
+            have = sorted(d.name for d in root.iterdir() if d.is_dir() and not d.name.startswith("."))
             raise FileNotFoundError(f"split folder {split_dirs[0]} does not exist; splits found: {have}")
     else:
         split_dirs = sorted(d for d in root.iterdir() if d.is_dir() and not d.name.startswith("."))

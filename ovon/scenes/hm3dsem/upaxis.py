@@ -29,8 +29,10 @@ def parse_up(text: str) -> tuple[np.ndarray, np.ndarray]:
         v = np.asarray([float(x) for x in t.split(",")], dtype=float)
     except ValueError:
         v = np.zeros(0)
-    if v.shape != (3,) or not np.isfinite(v).all() or np.linalg.norm(v) < 1e-9:
+    if v.shape != (3,) or not np.isfinite(v).all():
         raise ValueError(f"--up {text!r}: expected one of {sorted(AXES)} or three numbers x,y,z")
+    if np.linalg.norm(v) < 1e-9:
+        raise ValueError(f"--up {text!r}: the up vector must not be all zero; fix: e.g. --up 0,0,1 or --up z")
     return v / np.linalg.norm(v), _perpendicular_front(v / np.linalg.norm(v))
 
 

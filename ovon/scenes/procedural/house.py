@@ -70,6 +70,8 @@ def _shade_by_normal(v: np.ndarray, f: np.ndarray) -> np.ndarray:
 
 def generate_house(seed: int, vocab: Vocabulary | None = None, cfg: HouseConfig | None = None) -> Scene:
     """Build the house for `seed` (same seed + config -> identical arrays)."""
+    if not 0 <= int(seed) < 2**32:  # the generator's seed is 32 bits: a larger one would repeat a smaller one's house
+        raise ValueError(f"house seed {seed} is outside [0, 2**32); fix: pass a seed in that range")
     vocab = vocab if vocab is not None else load_vocabulary()
     cfg = cfg if cfg is not None else HouseConfig()
     root = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, 0x0F0F])
