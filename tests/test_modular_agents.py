@@ -294,7 +294,7 @@ def test_config_presets_overrides_and_errors():
     assert kwargs == {"navigator.stop_distance_m": 0.6, "preset": "cpu"}
     check_agent("vlfm", kwargs)
     assert VLFMAgent(**kwargs).cfg.navigator.stop_distance_m == 0.6
-    with pytest.raises(AgentError, match="stop_distance_m"):
+    with pytest.raises(ConfigError, match="stop_distance_m"):  # the config's own line, not wrapped
         check_agent("vlfm", _agent_kwargs(["navigator.stop_distanc=0.6"], None))
 
 

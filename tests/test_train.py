@@ -17,7 +17,7 @@ import torch
 torch.set_num_threads(1)
 
 from ovon.train.bc import SHARD_FORMAT  # noqa: E402
-from ovon.train.config import TrainConfig, train_preset  # noqa: E402
+from ovon.train.config import PPOConfig, TrainConfig, train_preset  # noqa: E402
 from ovon.train.episodes import adhoc_specs  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
 from ovon.train.text import needed_texts, write_text_table  # noqa: E402
@@ -105,6 +105,8 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
         algo, n, split = "dagger", 7, 3
         extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True),
                  "checkpoint_every": 3}
+    if algo == "ppo":  # a PPO minibatch holds whole envs: one env, one minibatch
+        extra = {"ppo": PPOConfig(minibatches=1)}
     cfg = train_preset("tiny", algo=algo, expert="shortest-path", num_envs=1, rollout_steps=6,
                        max_updates=n, text_cache=table_path, **extra)
     train(cfg, house_specs, tmp_path / "straight")

@@ -71,8 +71,12 @@ def check_agent(name: str, kwargs: dict | None = None) -> None:
     kwargs = dict(kwargs or {})
     cls = load_agent_class(name)
     _bind(name, cls, kwargs)
+    from ovon.config.base import ConfigError
+
     try:
         agent = cls(**kwargs)
+    except ConfigError:  # already one line naming the argument and its fix
+        raise
     except Exception as e:  # noqa: BLE001 - the constructor is user code: report, don't trace
         detail = " ".join(str(e).split())[:200]
         args = ", ".join(f"{k}={v!r}" for k, v in kwargs.items()) or "no arguments"

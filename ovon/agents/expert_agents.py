@@ -5,6 +5,9 @@ angle, step, FOV, success radius) comes from the episode's own sim/task config."
 
 from __future__ import annotations
 
+from typing import Any
+
+from ovon.config.base import from_dict, values_from_option
 from ovon.experts import FrontierExpertConfig, ShortestPathExpertConfig
 from ovon.experts.factory import make_expert
 from ovon.experts.rig import Embodiment
@@ -37,11 +40,22 @@ class _ExpertAgent:
         return action
 
 
+def expert_config(cls: type, kwargs: dict[str, Any]) -> Any:
+    """The expert config of these keyword arguments (`--agent-arg KEY=VALUE`) through `from_dict`: the
+    declared domains, an unknown key named with the valid ones, one ConfigError line naming the argument.
+    Why not `cls(**kwargs)`: it checks nothing, so `stop_margin_m=x` failed mid-episode (a TypeError after
+    the run folder existed) and `no_frontier_behaviour=fly` or `lookahead_m=-1` ran."""
+    with values_from_option("--agent-arg"):
+        return from_dict(cls, kwargs)
+
+
 class ShortestPathAgent(_ExpertAgent):
-    def __init__(self, **kwargs):
-        super().__init__("shortest-path", ShortestPathExpertConfig(**kwargs))
+    def __init__(self, **kwargs: Any) -> None:
+        """`kwargs`: `ShortestPathExpertConfig` fields, checked against their declared domains."""
+        super().__init__("shortest-path", expert_config(ShortestPathExpertConfig, kwargs))
 
 
 class FrontierAgent(_ExpertAgent):
-    def __init__(self, **kwargs):
-        super().__init__("frontier", FrontierExpertConfig(**kwargs))
+    def __init__(self, **kwargs: Any) -> None:
+        """`kwargs`: `FrontierExpertConfig` fields, checked against their declared domains."""
+        super().__init__("frontier", expert_config(FrontierExpertConfig, kwargs))

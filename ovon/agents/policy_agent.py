@@ -12,12 +12,26 @@ instance -> category map through `observation["privileged"]` (ORACLE PERCEPTION)
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from ovon.config.base import Pattern, constrained, non_negative, positive, validate, values_from_option
 from ovon.models.encoders import encode_observation
+
+
+@dataclass(frozen=True)
+class PolicyAgentArgs:
+    """The settings of `PolicyAgent` (`--agent-arg KEY=VALUE`) with their domains, checked before the
+    checkpoint is read. Why: `temperature <= 0` let nan through (softmax of nan: every action sampled from
+    garbage, or a JSON error naming no key), and any non-empty string counted as `deterministic`."""
+
+    deterministic: bool = True
+    device: str = constrained("cpu", Pattern(r"cpu|cuda(:[0-9]+)?|mps", "cpu, cuda, cuda:N or mps"))
+    threads: int = non_negative(1)  # 0: leave torch's default
+    temperature: float = positive(1.0)
 
 
 class PolicyAgent:
@@ -30,6 +44,8 @@ class PolicyAgent:
         from ovon.models.encoders import TableTextEncoder
         from ovon.models.policy import ActorCritic
 
+        with values_from_option("--agent-arg"):  # a real bool, a finite temperature > 0, ...: one line each
+            validate(PolicyAgentArgs(deterministic, device, threads, temperature))
         if threads > 0:
             torch.set_num_threads(threads)
         path = Path(checkpoint)
@@ -38,8 +54,6 @@ class PolicyAgent:
         self.policy = ActorCritic.load(path, map_location=device, flag="checkpoint").eval()
         self.device = torch.device(device)
         self.deterministic = deterministic
-        if temperature <= 0:
-            raise ValueError(f"temperature must be > 0, got {temperature}")
         self.temperature = float(temperature)
         self.encoder_cfg = self.policy.encoder_cfg or EncoderConfig()
         extra = getattr(self.policy, "checkpoint_extra", {}) or {}

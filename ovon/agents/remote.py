@@ -11,10 +11,14 @@ never from the command line or the run folder.
 
 from __future__ import annotations
 
+import ipaddress
 import multiprocessing.util
 import os
+import re
+import socket
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ovon.config.base import ConfigError, in_range
 
@@ -36,14 +40,64 @@ def is_remote(agent: str) -> bool:
     return str(agent).startswith(PREFIX)
 
 
+# a DNS name (labels of letters, digits, '-' and '_', dot-separated) or an IPv4 address
+_LABEL = r"[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?"
+_HOST_NAME = re.compile(rf"(?=.{{1,253}}$){_LABEL}(?:\.{_LABEL})*\.?")
+
+
 def parse_address(agent: str) -> tuple[str, int]:
-    """`remote:HOST:PORT` (IPv6 as `remote:[::1]:PORT`) -> (host, port); one-line ConfigError otherwise."""
+    """`remote:HOST:PORT` (IPv6 as `remote:[::1]:PORT`) -> (host, port); one-line ConfigError otherwise.
+
+    HOST is checked here, not by ZeroMQ: a space, a scheme (`http://`), a wildcard (`*`) or a bare IPv6
+    ended in "internal error: ZMQError: Invalid argument", and `127.0.0.1:5555:1` was read as the IPv6
+    host `127.0.0.1:5555`."""
     rest = str(agent)[len(PREFIX) :]
     host, sep, port = rest.rpartition(":")
-    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    bracketed = host.startswith("[") and host.endswith("]")
+    host = host[1:-1] if bracketed else host
     if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
         raise ConfigError(f"--agent {agent!r} is not remote:HOST:PORT with PORT in 1..65535; {_FIX}")
+    why = _bad_host(host, bracketed)
+    if why:
+        raise ConfigError(f"--agent {agent!r}: HOST {host!r} {why}; {_FIX}")
     return host, int(port)
+
+
+def _bad_host(host: str, bracketed: bool) -> str:
+    """Why `host` cannot be connected to ("" when it can be): a DNS name, an IPv4 address, or an IPv6
+    address in brackets."""
+    if "://" in host:
+        return "holds a scheme; expected a bare host name or IP address (no http:// or tcp://)"
+    if bracketed:
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            return "in brackets is not an IPv6 address"
+        return ""
+    if ":" in host:
+        return ("holds ':'; expected one HOST:PORT (an IPv6 address goes in brackets, e.g. remote:[::1]:5555, "
+                "and nothing may follow PORT)")
+    if host == "*":
+        return "is an address to listen on (ovon serve --host), not one to connect to; expected the server's host"
+    if not _HOST_NAME.fullmatch(host):
+        return "is not a host name or IP address (letters, digits, '-', '_' and dots)"
+    return ""
+
+
+def _resolve(spec: str, host: str, port: int) -> None:
+    """Refuse a host that does not resolve, before connecting: ZeroMQ would retry it silently and the
+    handshake would time out as "nothing is listening there"."""
+    try:
+        socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError) as e:
+        why = getattr(e, "strerror", None) or str(e)
+        raise ConfigError(f"--agent {spec}: the host {host!r} does not resolve ({why}); fix: check the host "
+                          "name (or pass the server's IP address), e.g. remote:127.0.0.1:5555") from None
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:60] + "..." + text[-15:]
 
 
 def episode_name(info: dict) -> str:
@@ -63,6 +117,7 @@ class RemoteAgent:
 
         self.spec, self.cfg = str(agent), cfg or RemoteConfig()
         host, port = parse_address(self.spec)
+        _resolve(self.spec, host, port)
         self._pending: dict[int, dict] = {}  # stream -> episode info not sent yet
         self._info: dict[int, dict] = {}  # stream -> info of its current episode (for error lines)
         self._steps: dict[int, int] = {}
@@ -79,17 +134,36 @@ class RemoteAgent:
         # a worker process that ends normally says goodbye, so the server frees its agents at once
         multiprocessing.util.Finalize(self, self.client.close, exitpriority=10)
         hello = self.client.hello
-        self.name = str(hello.get("agent") or self.spec)
-        self.privileged = bool(hello.get("privileged"))
+        # The name it introduces itself with (the row name of table.md unless --name: `check_remote`
+        # checks it); anything but a string is the address.
+        agent_name = hello.get("agent")
+        self.name = agent_name if isinstance(agent_name, str) and agent_name.strip() else self.spec
+        privileged = hello.get("privileged")
         wanted = hello.get("observations")
-        self.observations = tuple(OBSERVATIONS if wanted is None else wanted)
+        fix = ("fix: the `observations` the agent is served with (ovon serve --observations, "
+               "ovon_agent.serve(observations=...))")
+        if not (wanted is None or (isinstance(wanted, list | tuple) and all(isinstance(o, str) for o in wanted))):
+            self.close()  # a string would be split into letters, a number is not iterable
+            raise ConfigError(
+                f"--agent {self.spec}: the agent {_short(self.name)} answered the handshake with observations "
+                f"{_short(wanted)}; expected a list of observation names ({', '.join(OBSERVATIONS)}); {fix}"
+            )
+        self.observations = tuple(OBSERVATIONS if wanted is None else dict.fromkeys(wanted))
         unknown = [o for o in self.observations if o not in OBSERVATIONS]
         if unknown:
             self.close()
             raise ConfigError(
-                f"--agent {self.spec}: the agent {self.name!r} wants observations {unknown}, which ovon "
-                f"does not provide ({', '.join(OBSERVATIONS)}); fix: its `observations`"
+                f"--agent {self.spec}: the agent {_short(self.name)} wants observations {_short(unknown)}, which "
+                f"ovon does not provide ({', '.join(OBSERVATIONS)}); {fix}"
             )
+        if not (privileged is None or isinstance(privileged, bool)):
+            self.close()  # bool("false") is True
+            raise ConfigError(
+                f"--agent {self.spec}: the agent {_short(self.name)} answered the handshake with privileged "
+                f"{_short(privileged)}; expected true or false; fix: serve it with ovon serve or ovon_agent.serve "
+                "of the same version as this ovon"
+            )
+        self.privileged = bool(privileged)
         if self.privileged and not self.cfg.allow_privileged:
             self.close()
             raise ConfigError(
@@ -106,6 +180,11 @@ class RemoteAgent:
             return f"{message}; fix: install the same version of ovon on both sides (or of ovon-agent there)"
         if kind == "agent":
             return f"{message}; fix: see the server's log and fix the agent{resume}"
+        if kind == "protocol":
+            return (f"{message}; fix: check that {self.spec.removeprefix(PREFIX)} is an agent served by `ovon serve` "
+                    "or ovon_agent.serve, of the same version on both sides")
+        if kind == "address":
+            return f"{message}; {_FIX}"
         port = self.spec.rpartition(":")[2]
         return (
             f"{message}; fix: check that the agent is served there (`ovon serve AGENT --port {port}`) and raise "
@@ -156,9 +235,10 @@ class RemoteAgent:
             client.close()
 
 
-def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None) -> str:
+def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None, row_name: str = "") -> str:
     """Before any work: the address parses, the agent answers the handshake and the run allows what it
-    asks for. Returns the name the agent introduces itself with."""
+    asks for. Returns the name the agent introduces itself with (checked as a row name unless `row_name`, the
+    --name that replaces it, is given)."""
     if agent_kwargs:
         key = next(iter(agent_kwargs))
         flag = "--checkpoint" if key == "checkpoint" else f"--agent-arg {key}=..."
@@ -169,6 +249,17 @@ def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None
     parse_address(agent)
     remote = RemoteAgent(agent, cfg)
     try:
-        return remote.name
+        name = remote.name
     finally:
         remote.close()
+    from ovon.config.base import domain_of
+    from ovon.evaluate.harness import EvalConfig
+
+    domain = domain_of(EvalConfig, "name")
+    if not row_name and not domain.accepts(name):  # a '|' or a line break would break table.md ("x\n" * 5000)
+        raise ConfigError(
+            f"--agent {agent}: the agent introduces itself as {_short(name)}, which cannot name a row of the "
+            f"table (expected {domain.describe('a string')}); fix: pass --name NAME, or serve the agent under "
+            "another name (ovon serve --name, ovon_agent.serve(name=...))"
+        )
+    return name

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -94,11 +95,28 @@ def _agent_kwargs(items: list[str], checkpoint: str | None) -> dict:
             kwargs[k.strip()] = yaml.safe_load(v) if v != "" else ""
         except (yaml.YAMLError, RecursionError, ValueError):
             kwargs[k.strip()] = v  # not YAML: the text itself
+        if not _finite(kwargs[k.strip()]):
+            # the arguments are part of the run's identity (JSON, which has no nan / inf): refused later
+            # with a message naming no key
+            raise ConfigError(f"--agent-arg {item!r}: {v.strip()} is not a finite number (nan and inf cannot be "
+                              f"recorded in the run folder); fix: pass a finite number, e.g. --agent-arg "
+                              f"{k.strip()}=0.5")
     if checkpoint is not None:
         if "checkpoint" in kwargs:
             raise ConfigError("--checkpoint and --agent-arg checkpoint=... both given; fix: pass one of them")
         kwargs["checkpoint"] = checkpoint
     return kwargs
+
+
+def _finite(value: object) -> bool:
+    """No nan / inf anywhere in a parsed `--agent-arg` value (YAML reads `.nan`, `.inf`, `[1, .nan]`)."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    if isinstance(value, list | tuple):
+        return all(_finite(v) for v in value)
+    if isinstance(value, dict):
+        return all(_finite(v) for v in value.values())
+    return True
 
 
 def checkpoint_facts(checkpoint: str, task: str) -> dict:

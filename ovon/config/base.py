@@ -17,8 +17,9 @@ Declaring a domain (the one mechanism; `validate` checks it, and so does every `
 
 Field helpers: `positive`, `non_negative`, `in_range`, `one_of`, `non_empty(each=...)`, `each`,
 `existing_file`, `existing_dir`, or `constrained(default, Domain)` for any `Domain`. Types are checked
-too (an int field refuses 1.5 and true, a float field refuses nan and inf, a `Literal` lists its choices),
-so a field without a helper still has the domain of its type. `flag="--episodes"` names the command-line
+too (an int field refuses 1.5 and true, a float field refuses nan and inf, a `Literal` lists its choices,
+a str field takes a `pathlib.Path` and `validate` stores its str), so a field without a helper still has
+the domain of its type. `flag="--episodes"` names the command-line
 option that sets a field (used in the fix of the message instead of `--set key=`).
 """
 
@@ -29,6 +30,7 @@ import contextvars
 import dataclasses
 import difflib
 import math
+import os
 import re
 import types
 import typing
@@ -418,8 +420,45 @@ def _type_ok(value: Any, tp: Any) -> bool:
     if tp is float:
         return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
     if tp is str:
-        return isinstance(value, str)
+        # a path object (pathlib.Path) where a path is a str field: `validate` stores it as its str
+        return isinstance(value, str) or _str_path(value) is not None
     return True
+
+
+def _str_path(value: Any) -> str | None:
+    """`value` as the str it stands for when it is a path object (os.PathLike giving a str), else None.
+    Why: `from_dict` reads `Path(...)` into a str field, so a config built in Python must take it too (a
+    Path for `data=` was refused as "not an existing folder" although the folder existed)."""
+    if isinstance(value, str) or not isinstance(value, os.PathLike):
+        return None
+    text = os.fspath(value)
+    return text if isinstance(text, str) else None
+
+
+def _accepts_str(tp: Any) -> bool:
+    return tp is str or (_is_union(tp) and str in typing.get_args(tp))
+
+
+def _paths_as_str(cfg: Any) -> None:
+    """Replace path objects held by str fields of the config tree `cfg` with their str (in place, frozen
+    configs included): what a config holds is written to JSON files (run identities) and compared as text."""
+    if not dataclasses.is_dataclass(cfg) or isinstance(cfg, type):
+        return
+    hints = _field_types(type(cfg))
+    for f in dataclasses.fields(cfg):
+        value, tp = getattr(cfg, f.name), hints[f.name]
+        text = _str_path(value) if _accepts_str(tp) else None
+        if text is not None:
+            object.__setattr__(cfg, f.name, text)
+        elif dataclasses.is_dataclass(value):
+            _paths_as_str(value)
+        elif isinstance(value, list | tuple):
+            args = typing.get_args(tp)
+            if typing.get_origin(tp) in (list, tuple) and args and args[0] is str:  # list[str], tuple[str, ...]
+                if any(_str_path(v) is not None for v in value):
+                    object.__setattr__(cfg, f.name, type(value)(_str_path(v) or v for v in value))
+            for v in value:
+                _paths_as_str(v)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -443,6 +482,23 @@ def values_from_file(path: str | Path) -> Iterator[None]:
         _VALUES_FILE.reset(token)
 
 
+# Or an option that passes KEY=VALUE pairs to a config (`--agent-arg`): messages then name the value as
+# `--agent-arg KEY` and its fix as `--agent-arg KEY=VALUE` (an agent's settings cannot be --set).
+_VALUES_OPTION: contextvars.ContextVar[str | None] = contextvars.ContextVar("ovon_values_option", default=None)
+
+
+@contextlib.contextmanager
+def values_from_option(option: str) -> Iterator[None]:
+    """Within the block, messages name a value as `OPTION KEY` and its fix as `OPTION KEY=VALUE`: for configs
+    built from the KEY=VALUE pairs of one command-line option (an agent's `--agent-arg`, which are also its
+    keyword arguments in Python)."""
+    token = _VALUES_OPTION.set(option)
+    try:
+        yield
+    finally:
+        _VALUES_OPTION.reset(token)
+
+
 def _in_file(key: str) -> tuple[str, str] | None:
     """(file, key inside the file) inside `values_from_file`, else None (the key is --set on a command line)."""
     source = _VALUES_FILE.get()
@@ -455,12 +511,18 @@ def _in_file(key: str) -> tuple[str, str] | None:
 
 
 def _shown_key(key: str) -> str:
+    option = _VALUES_OPTION.get()
+    if option is not None:
+        return f"{option} {key}"
     found = _in_file(key)
     return key if found is None else f"{found[0]}:{found[1]}"
 
 
 def _fix_value(key: str, expected: str) -> str:
     """The fix that gives `key` a value that is `expected`."""
+    option = _VALUES_OPTION.get()
+    if option is not None:
+        return f"{option} {key}=VALUE with VALUE {expected}"
     found = _in_file(key)
     if found is None:
         return f"--set {key}=VALUE with VALUE {expected}"
@@ -469,6 +531,9 @@ def _fix_value(key: str, expected: str) -> str:
 
 def _fix_group(where: str) -> str:
     """The fix that sets the fields of the group `where` one by one."""
+    option = _VALUES_OPTION.get()
+    if option is not None:
+        return f"{option} {where + '.' if where else ''}FIELD=VALUE"
     found = _in_file(where)
     if found is None:
         return f"--set {where + '.' if where else ''}FIELD=VALUE"
@@ -506,6 +571,30 @@ def _default_of(f: dataclasses.Field) -> Any:
     return MISSING
 
 
+def _config_type(tp: Any) -> type | None:
+    """The config class of a field typed `SomeConfig` or `SomeConfig | None`, else None."""
+    if dataclasses.is_dataclass(tp):
+        return tp
+    if _is_union(tp):
+        inner = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(inner) == 1 and dataclasses.is_dataclass(inner[0]):
+            return inner[0]
+    return None
+
+
+def _not_a_config(owner: type, key: str, value: Any, sub: type) -> str:
+    """A config field built in Python with something other than its config class (a dict, typically):
+    `from_dict` reads mappings, a constructor does not."""
+    kind = type(value).__name__
+    got = f"{'an' if kind[:1].lower() in 'aeiou' else 'a'} {kind}"
+    if isinstance(value, Mapping):
+        how = (f"pass {sub.__name__}(...) there, or build the whole config with from_dict({owner.__name__}, "
+               "{...}), which reads nested mappings")
+    else:
+        how = f"pass {sub.__name__}(...) there"
+    return f"{_shown_key(key)} = {_short(value)}: expected a {sub.__name__}, got {got}; fix: {how}"
+
+
 def _violation(key: str, value: Any, f: dataclasses.Field, tp: Any) -> str:
     expected = _expected(f, tp)
     flag = f.metadata.get("flag")
@@ -514,6 +603,19 @@ def _violation(key: str, value: Any, f: dataclasses.Field, tp: Any) -> str:
     shown = "" if hide else f" (default {_short(default)})"
     how = f"pass {flag} with {expected}" if flag else _fix_value(key, expected)
     return f"{flag or _shown_key(key)} = {_short(value)}: expected {expected}; fix: {how}{shown}"
+
+
+def _check_keys(data: Mapping[Any, Any], valid: list[str], where: str, cls: type) -> None:
+    """Refuse keys that are not strings (a YAML `1: 2`, a dict built in Python), then unknown keys."""
+    odd = [k for k in data if not isinstance(k, str)]
+    if odd:
+        k = odd[0]
+        raise ConfigError(f"config key {_short(k)} ({type(k).__name__}) of {where or cls.__name__} is not a name; "
+                          f"valid keys{' of ' + where if where else ''}: {', '.join(valid)}; fix: use those names "
+                          "(strings) as keys")
+    unknown = set(data) - set(valid)
+    if unknown:
+        raise _unknown(unknown, valid, where)
 
 
 def _unknown(unknown: set[str], valid: list[str], where: str) -> ConfigError:
@@ -547,7 +649,11 @@ def violations(cfg: Any, where: str = "") -> list[str]:
             out += violations(value, key)
             continue
         if not _type_ok(value, tp):
-            out.append(_violation(key, value, f, tp))
+            sub = _config_type(tp)
+            if sub is not None and not (value is None and type(None) in typing.get_args(tp)):
+                out.append(_not_a_config(type(cfg), key, value, sub))
+            else:
+                out.append(_violation(key, value, f, tp))
             bad_keys.add(f.name)
             continue
         if isinstance(value, list | tuple | dict):  # configs inside lists / mappings have domains too
@@ -567,7 +673,9 @@ def violations(cfg: Any, where: str = "") -> list[str]:
             values = ", ".join(f"{_shown_key(prefix + k)} = {_short(Rule.value(cfg, k))}" for k in r.keys)
             expected = " ".join(f"{prefix}{t}" if t in r.keys else t for t in r.expected.split(" "))
             found = _in_file(prefix + r.keys[0])
-            how = "--set the values" if found is None else f"edit {found[0]}"
+            option = _VALUES_OPTION.get()
+            how = (f"pass {option} KEY=VALUE for them" if option is not None
+                   else "--set the values" if found is None else f"edit {found[0]}")
             out.append(f"{values}: expected {expected}; fix: {how} so that {expected} holds")
     return out
 
@@ -575,11 +683,13 @@ def violations(cfg: Any, where: str = "") -> list[str]:
 def validate(cfg: T, where: str = "") -> T:
     """Raise one ConfigError (one line) naming every field outside its domain; returns `cfg` when valid.
 
-    Every command calls this (through `build`, `from_dict` or `merge`, or directly) before any work."""
+    Every command calls this (through `build`, `from_dict` or `merge`, or directly) before any work. Path
+    objects in str fields are stored as their str (in place), as `from_dict` does."""
     problems = violations(cfg, where)
     if problems:
         raise ConfigError(problems[0] if len(problems) == 1
                           else f"{len(problems)} invalid config values: " + " | ".join(problems))
+    _paths_as_str(cfg)
     return cfg
 
 
@@ -605,9 +715,7 @@ def _from_dict(cls: type[T], data: Mapping[str, Any], where: str) -> T:
     if not isinstance(data, Mapping):
         raise ConfigError(f"{where or cls.__name__} = {_short(data)}: expected a mapping of {cls.__name__} fields")
     types_ = _field_types(cls)
-    unknown = set(data) - set(types_)
-    if unknown:
-        raise _unknown(unknown, sorted(types_), where)
+    _check_keys(data, sorted(types_), where, cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     kwargs = {k: _coerce_field(cls, fields[k], types_[k], v, f"{where}.{k}" if where else k) for k, v in data.items()}
     return cls(**kwargs)
@@ -637,9 +745,7 @@ def _merge(cfg: T, data: Mapping[str, Any], where: str) -> T:
         raise ConfigError(f"{where or type(cfg).__name__} = {_short(data)}: expected a mapping of "
                           f"{type(cfg).__name__} fields; fix: {_fix_group(where)}")
     types_ = _field_types(type(cfg))
-    unknown = set(data) - set(types_)
-    if unknown:
-        raise _unknown(unknown, sorted(types_), where)
+    _check_keys(data, sorted(types_), where, type(cfg))
     fields = {f.name: f for f in dataclasses.fields(cfg)}
     changes = {}
     for k, v in data.items():

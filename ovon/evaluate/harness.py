@@ -50,6 +50,9 @@ from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
+# A row of table.md (and a label of figures): a '|' or a line break would split the row or the table.
+ROW_NAME = Pattern(r"(?=.*\S)[^|\x00-\x1f\x7f-\x9f\u2028\u2029]{1,100}",
+                   "1 to 100 characters without '|', line breaks or control characters (a row of table.md)")
 HOUSE_SEEDS = Pattern(r" *([0-9]+(-[0-9]+)? *(, *[0-9]+(-[0-9]+)? *)*)?", "house seeds like 80000-80003 or 0,5-7")
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
@@ -73,7 +76,8 @@ class EvalConfig:
     chunk: int = in_range(4, 1, 100_000)  # episodes per work unit (same scene)
     sim: SimConfig = field(default_factory=lambda: SimConfig(camera=CameraConfig(width=160, height=120)))
     task: TaskConfig = field(default_factory=TaskConfig)
-    name: str | None = non_empty(None, flag="--name")  # row name in tables; default = agent (its own name if remote)
+    # row name in tables; default = agent (its own name if remote)
+    name: str | None = constrained(None, ROW_NAME, flag="--name")
     remote: RemoteConfig = field(default_factory=RemoteConfig)  # --agent remote:HOST:PORT only
     strict: bool = False  # refuse a split holding an invalid episode instead of skipping it (counted)
     rules: ClassVar = (rule(("task.failed_stop_ends",), bool,
@@ -367,7 +371,10 @@ def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> tuple[dict[st
 
     validate(cfg)
     if is_remote(cfg.agent):
+        # the handshake also when --name is given: a bad server is found here, not in the workers
         name = cfg.name or check_remote(cfg.agent, cfg.remote, cfg.agent_kwargs)
+        if cfg.name:
+            check_remote(cfg.agent, cfg.remote, cfg.agent_kwargs, row_name=cfg.name)
     else:
         check_agent(cfg.agent, cfg.agent_kwargs)
         name = cfg.name or cfg.agent

@@ -6,12 +6,85 @@ its run folder (`folder.py`): identity, one writer at a time, resume rules, whoe
 
 from __future__ import annotations
 
+import dataclasses
+import os
 from collections.abc import Sequence
 from pathlib import Path
 
 from ovon.task.episode import EpisodeSpec
-from ovon.train.config import PRESETS, TrainConfig, build_config, train_preset
+from ovon.train.config import PRESETS, PPOConfig, TrainConfig, build_config, train_preset
 from ovon.train.folder import EpisodeSource, open_run_folder, resolve_episodes
+
+_FIX_CFG = "fix: build it with train_preset(NAME, ...) or build_config(...)"
+
+
+def check_config(cfg: TrainConfig) -> TrainConfig:
+    """`cfg` checked as `ovon train` checks it (`ovon.config.base.validate`: declared domains and rules),
+    returned with path objects stored as str. Why in `train()`: a config built in Python (`train_preset("tiny",
+    num_envs=0)`, `dataclasses.replace(cfg, lr=-1)`) used to fail inside torch after the run folder was
+    written, and the corrected call was then refused as a different run.
+
+    Two values outside the declared domains stay allowed, as they always ran on purpose: `lr` 0 (a frozen
+    policy: the diagnostic runs of tests/test_train_rl.py; the fine-tune lrs already allow 0), and, for BC /
+    DAgger, `ppo.minibatches > num_envs` (a PPO setting they never read; its own domain still holds)."""
+    from ovon.config.base import ConfigError, validate
+
+    if not isinstance(cfg, TrainConfig):
+        raise ConfigError(f"train(cfg={type(cfg).__name__}): expected a TrainConfig; {_FIX_CFG}")
+    relaxed: dict = {}
+    if type(cfg.lr) in (int, float) and cfg.lr == 0:
+        relaxed["lr"] = 1.0
+    if cfg.algo in ("bc", "dagger") and isinstance(cfg.ppo, PPOConfig):
+        validate(cfg.ppo, "ppo")
+        relaxed["ppo"] = dataclasses.replace(cfg.ppo, minibatches=1)
+    if not relaxed:
+        return validate(cfg)
+    checked = validate(dataclasses.replace(cfg, **relaxed))
+    return dataclasses.replace(checked, **{k: getattr(cfg, k) for k in relaxed})
+
+
+def check_source(specs: object) -> None:
+    """The episodes argument of `train()`: a list of `EpisodeSpec`, an `EpisodeSource` whose fields lie in
+    their domains (`ovon train`'s options: `--episodes` > 0, `--task`), or None. Why: `limit=-1` sliced
+    the split to all episodes but the last, `limit=0` of procedural houses meant all of them, and a string
+    (a dataset path) was read as a list of characters."""
+    from ovon.config.base import ConfigError
+
+    if specs is None:
+        return
+    if isinstance(specs, EpisodeSource):
+        limit, task = specs.limit, specs.task
+        if limit is not None and (not isinstance(limit, int) or isinstance(limit, bool) or limit <= 0):
+            raise ConfigError(f"EpisodeSource(limit={limit!r}): expected an integer > 0 (at most that many "
+                              "episodes) or None (all); fix: pass limit=N with N > 0, or leave it out")
+        if task not in ("objectnav", "pointnav"):
+            raise ConfigError(f"EpisodeSource(task={task!r}): expected one of 'objectnav', 'pointnav'; fix: "
+                              "pass task='objectnav' (the default) or task='pointnav'")
+        for key in ("data", "scenes", "procedural", "split"):
+            value = getattr(specs, key)
+            if value is not None and not isinstance(value, str | os.PathLike):
+                raise ConfigError(f"EpisodeSource({key}={value!r}): expected a string; fix: pass {key} as a "
+                                  "string (a path for data and scenes, seeds like '0-7' for procedural)")
+        return
+    if isinstance(specs, str | bytes | os.PathLike) or not isinstance(specs, Sequence):
+        raise ConfigError(f"train(specs={specs!r:.80}): expected a list of EpisodeSpec, an EpisodeSource or None; "
+                          "fix: pass EpisodeSource(data=ROOT, scenes=ROOT, split=NAME) for a dataset split")
+    bad = next((i for i, s in enumerate(specs) if not isinstance(s, EpisodeSpec)), None)
+    if bad is not None:
+        raise ConfigError(f"train(specs): item {bad} is a {type(specs[bad]).__name__}, not an EpisodeSpec; fix: "
+                          "pass a list of EpisodeSpec (ovon.task.episode) or an EpisodeSource")
+
+
+def check_out_dir(out_dir: object) -> Path:
+    """The run folder argument: a path (str or os.PathLike; None would become a folder named 'None') that
+    can be a run folder (`ovon.atomic.check_output_path`: not empty, not a file, not under a file)."""
+    from ovon.atomic import check_output_path
+    from ovon.config.base import ConfigError
+
+    if not isinstance(out_dir, str | os.PathLike):
+        raise ConfigError(f"train(out_dir={out_dir!r:.80}): expected the path of a run folder (a str or a Path); "
+                          "fix: pass out_dir='runs/NAME'")
+    return check_output_path(out_dir, "out_dir", folder=True, error=ConfigError)
 
 
 def train(cfg: TrainConfig, specs: Sequence[EpisodeSpec] | EpisodeSource | None, out_dir: str | Path,
@@ -21,7 +94,21 @@ def train(cfg: TrainConfig, specs: Sequence[EpisodeSpec] | EpisodeSource | None,
     `specs`: the episodes (a list, or an `EpisodeSource` naming a dataset split or procedural houses;
     None for BC from `bc.shards`). A folder that already holds a run is refused unless `resume`, and
     then only if it is the same run (config, episodes, init; `folder.MAY_CHANGE` may differ); a second
-    process on the same folder is refused while the first runs (`ovon.runfolder.RunFolderError`)."""
+    process on the same folder is refused while the first runs (`ovon.runfolder.RunFolderError`).
+
+    Every argument is checked first (`check_config`, `check_source`, `check_out_dir`): a wrong one is one
+    ConfigError line and nothing is written."""
+    from ovon.config.base import ConfigError
+
+    cfg = check_config(cfg)
+    check_source(specs)
+    check_out_dir(out_dir)
+    if not isinstance(resume, bool):
+        raise ConfigError(f"train(resume={resume!r}): expected True or False; fix: pass resume=True to continue "
+                          "the run in out_dir, else leave it out")
+    if init is not None and not isinstance(init, str | os.PathLike):
+        raise ConfigError(f"train(init={init!r:.80}): expected the path of a policy.pt (or of its run folder) or "
+                          "None; fix: pass init='runs/NAME/policy.pt'")
     episodes, config_keys, inputs = resolve_episodes(specs)
     if cfg.algo not in ("bc", "dagger", "ppo"):
         raise ValueError(f"unknown algorithm {cfg.algo!r}; valid: bc, dagger, ppo")

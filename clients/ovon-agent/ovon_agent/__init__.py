@@ -62,7 +62,8 @@ class ProtocolError(ValueError):
 
 class RemoteError(RuntimeError):
     """A call to a remote agent failed. `kind`: "timeout", "disconnected", "refused" (handshake or token),
-    "agent" (the server answered with an error)."""
+    "agent" (the server answered with an error), "protocol" (the answer does not follow the protocol: not
+    an ovon_agent server, or another version), "address" (the address cannot be connected to)."""
 
     def __init__(self, message: str, kind: str = "agent") -> None:
         super().__init__(message)
@@ -494,7 +495,15 @@ class Client:
         self._connected = False
         self._refused = False
         self._lost = False
-        self._socket.connect(self.address)
+        try:
+            self._socket.connect(self.address)
+        except zmq.ZMQError as e:  # a host ZeroMQ cannot read ("local host", "http://...", "*")
+            self.close()
+            raise RemoteError(
+                f"cannot connect to {self.address} ({e}): expected HOST a host name, an IPv4 address or an IPv6 "
+                "address (without brackets here) and PORT in 1..65535",
+                "address",
+            ) from None
         try:
             self.hello = self._call(
                 {"op": "hello", "protocol": PROTOCOL, "token": token, "client": client}, "the handshake"
@@ -552,7 +561,14 @@ class Client:
                 )
             ready = dict(poller.poll(max(1, int(min(left, 0.5) * 1000))))
             if self._socket in ready:
-                reply = unpack(self._socket.recv_multipart(copy=False))
+                try:
+                    reply = unpack(self._socket.recv_multipart(copy=False))
+                except ProtocolError as e:  # garbage, extension types, not a map: not an ovon_agent server
+                    raise RemoteError(
+                        f"the agent at {self.address} answered {what} with a message that does not follow the "
+                        f"ovon_agent protocol ({e})",
+                        "protocol",
+                    ) from None
                 if reply.get("id") != rid:
                     continue  # a late answer to a call that timed out
                 if reply["op"] == "error":
