@@ -287,7 +287,7 @@ def test_config_presets_overrides_and_errors():
         DAgRLODAgent()
     assert VLFMAgent.describe(detector="noisy") == "VLFM, oracle detection (miss 0.3, fp 0.3), oracle-vl value"
     # the command line passes dotted keys through (--agent-arg navigator.stop_distance_m=0.6)
-    from ovon.agents import AgentError, check_agent
+    from ovon.agents import check_agent
     from ovon.cli.evaluate import _agent_kwargs
 
     kwargs = _agent_kwargs(["navigator.stop_distance_m=0.6", "preset=cpu"], None)
