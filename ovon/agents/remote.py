@@ -252,10 +252,8 @@ def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None
         name = remote.name
     finally:
         remote.close()
-    from ovon.config.base import domain_of
-    from ovon.evaluate.harness import EvalConfig
+    from ovon.agents.base import ROW_NAME as domain
 
-    domain = domain_of(EvalConfig, "name")
     if not row_name and not domain.accepts(name):  # a '|' or a line break would break table.md ("x\n" * 5000)
         raise ConfigError(
             f"--agent {agent}: the agent introduces itself as {_short(name)}, which cannot name a row of the "

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar, Literal
 
+from ovon.agents.base import ROW_NAME
 from ovon.agents.remote import RemoteConfig
 from ovon.atomic import atomic_write_text
 from ovon.config.base import (
@@ -50,9 +51,6 @@ from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
 
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
-# A row of table.md (and a label of figures): a '|' or a line break would split the row or the table.
-ROW_NAME = Pattern(r"(?=.*\S)[^|\x00-\x1f\x7f-\x9f\u2028\u2029]{1,100}",
-                   "1 to 100 characters without '|', line breaks or control characters (a row of table.md)")
 HOUSE_SEEDS = Pattern(r" *([0-9]+(-[0-9]+)? *(, *[0-9]+(-[0-9]+)? *)*)?", "house seeds like 80000-80003 or 0,5-7")
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
