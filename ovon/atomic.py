@@ -103,19 +103,14 @@ def atomic_write_with(path: str | Path, write: Callable[[BinaryIO], Any]) -> Pat
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = _create_temp(path.parent, path.name)
-    try:
+
+    def fill() -> None:
         with os.fdopen(fd, "wb") as f:
             write(f)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
+
+    return _fill_then_rename(tmp, path, fill)
 
 
 def atomic_write_path(path: str | Path, write: Callable[[Path], Any]) -> Path:
@@ -127,9 +122,18 @@ def atomic_write_path(path: str | Path, write: Callable[[Path], Any]) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = _create_temp(path.parent, path.stem, suffix=f".tmp{path.suffix}")
     os.close(fd)
-    try:
+
+    def fill() -> None:
         write(tmp)
         _fsync(tmp)
+
+    return _fill_then_rename(tmp, path, fill)
+
+
+def _fill_then_rename(tmp: str | Path, path: Path, fill: Callable[[], Any]) -> Path:
+    """`fill()` the temp file, then rename it over `path`; on any error the temp file goes and `path` stays."""
+    try:
+        fill()
         os.replace(tmp, path)
     except BaseException:
         try:

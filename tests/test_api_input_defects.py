@@ -8,7 +8,6 @@ import dataclasses
 import math
 import socket
 import threading
-import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,31 +20,10 @@ import zmq
 from ovon_agent import Client, RemoteError
 
 from ovon.agents.remote import RemoteAgent, RemoteConfig, check_remote, parse_address
-from ovon.cli.main import main as ovon
 from ovon.config.base import ConfigError, from_dict, validate
 from ovon.evaluate.harness import EvalConfig
+from tests.cli_errors import one_line, run
 from tests.remote_agents import serving
-
-
-def run_cli(argv: list[str], capsys) -> tuple[int, list[str]]:
-    """`ovon argv` in this process: exit code and the lines of stderr that are not warnings."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            rc = ovon(argv)
-        except SystemExit as e:  # argparse
-            rc = int(e.code or 0)
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and "internal error" not in err, err
-    return rc, [ln for ln in err.strip().splitlines() if ln.strip() and not ln.startswith("ovon: warning:")]
-
-
-def one_line(rc: int, errors: list[str], *needles: str) -> str:
-    assert rc == 2 and len(errors) == 1 and errors[0].startswith("ovon: error:"), (rc, errors)
-    for n in needles:
-        assert n in errors[0], (n, errors[0])
-    assert "fix:" in errors[0], errors[0]
-    return errors[0]
 
 
 @pytest.fixture
@@ -182,7 +160,7 @@ def test_expert_agent_arguments_are_checked(agent: str, kwargs: dict, needle: st
 
 @pytest.mark.parametrize("arg", ["no_frontier_behaviour=fly", "stop_margin_m=x", "lookahead_m=-1"])
 def test_expert_agent_arguments_on_the_command_line(roots: list[str], tmp_path: Path, capsys, arg: str) -> None:
-    rc, errors = run_cli(["evaluate", "--agent", "frontier", "--agent-arg", arg, *roots], capsys)
+    rc, _, errors = run(["evaluate", "--agent", "frontier", "--agent-arg", arg, *roots], capsys)
     one_line(rc, errors, f"--agent-arg {arg.partition('=')[0]}")
     assert not (tmp_path / "out").exists()
 
@@ -211,7 +189,7 @@ def test_policy_agent_arguments_are_checked_before_the_checkpoint(tmp_path: Path
                                             ("random", "x=[1, .nan]")])
 def test_a_nan_agent_argument_names_its_key(roots: list[str], tmp_path: Path, capsys, agent: str, arg: str) -> None:
     extra = ["--checkpoint", str(tmp_path / "p.pt")] if agent == "policy" else []
-    rc, errors = run_cli(["evaluate", "--agent", agent, "--agent-arg", arg, *extra, *roots], capsys)
+    rc, _, errors = run(["evaluate", "--agent", agent, "--agent-arg", arg, *extra, *roots], capsys)
     one_line(rc, errors, f"--agent-arg {arg!r}", "not a finite number")
     assert not (tmp_path / "out").exists()
 
@@ -294,7 +272,7 @@ def test_garbage_during_a_run_names_the_episode_and_the_step() -> None:
 
 def test_a_garbage_reply_on_the_command_line_is_one_remote_line(roots: list[str], tmp_path: Path, capsys) -> None:
     with fake_server(GARBAGE["not msgpack"]) as port:
-        rc, errors = run_cli(["evaluate", "--agent", f"remote:127.0.0.1:{port}", "--set", "remote.timeout_s=5",
+        rc, _, errors = run(["evaluate", "--agent", f"remote:127.0.0.1:{port}", "--set", "remote.timeout_s=5",
                               *roots], capsys)
     one_line(rc, errors, f"tcp://127.0.0.1:{port} answered the handshake")
     assert not (tmp_path / "out").exists()
@@ -340,7 +318,7 @@ def test_bad_hosts_are_refused_before_connecting(agent: str, needle: str, roots:
     with pytest.raises(ConfigError, match="fix: --agent remote:HOST:PORT") as e:
         parse_address(agent)
     assert needle in str(e.value)
-    rc, errors = run_cli(["evaluate", "--agent", agent, *roots], capsys)
+    rc, _, errors = run(["evaluate", "--agent", agent, *roots], capsys)
     one_line(rc, errors, needle)
     assert not (tmp_path / "out").exists()
 
@@ -386,7 +364,7 @@ def test_a_good_row_name_is_kept(tmp_path: Path) -> None:
 
 
 def test_the_name_option_on_the_command_line(roots: list[str], tmp_path: Path, capsys) -> None:
-    rc, errors = run_cli(["evaluate", "--agent", "random", "--name", "a|b", *roots], capsys)
+    rc, _, errors = run(["evaluate", "--agent", "random", "--name", "a|b", *roots], capsys)
     one_line(rc, errors, "--name = 'a|b'")
     assert not (tmp_path / "out").exists()
 

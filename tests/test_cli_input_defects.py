@@ -8,37 +8,17 @@ import errno
 import json
 import os
 import shutil
-import warnings
 from pathlib import Path
 
 import pytest
 
 from ovon.cli.main import _run
-from ovon.cli.main import main as ovon
+from tests.cli_errors import one_line, run
 
 FIXTURE_SCENE = Path(__file__).parent / "fixtures" / "hm3dsem" / "00001-FixtureScn01"
 DEFS = Path(__file__).resolve().parents[1] / "ovon" / "experiments" / "defs"
 
 
-def run(argv: list[str], capsys) -> tuple[int, str, list[str]]:
-    """`ovon argv` in this process: exit code, stdout, and the lines of stderr that are not warnings."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            rc = ovon(argv)
-        except SystemExit as e:  # argparse
-            rc = int(e.code or 0)
-    out, err = capsys.readouterr()
-    assert "Traceback" not in err and "internal error" not in err, err
-    return rc, out, [ln for ln in err.strip().splitlines() if ln.strip() and not ln.startswith("ovon: warning:")]
-
-
-def one_line(rc: int, errors: list[str], *needles: str) -> str:
-    assert rc == 2 and len(errors) == 1 and errors[0].startswith("ovon: error:"), (rc, errors)
-    for n in needles:
-        assert n in errors[0], (n, errors[0])
-    assert "fix:" in errors[0], errors[0]
-    return errors[0]
 
 
 @pytest.fixture

@@ -9,13 +9,11 @@ import os
 import re
 import stat
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from ovon.cli.main import main as ovon
 from ovon.dataset.records import DatasetError
 from ovon.dataset.splits import (
     CategorySplit,
@@ -24,29 +22,11 @@ from ovon.dataset.splits import (
     empty_held_out_problem,
     load_category_split,
 )
+from tests.cli_errors import one_line, run
 
 OVON_SRC = Path(__file__).resolve().parents[1] / "ovon"
 
 
-def run(argv: list[str], capsys) -> tuple[int, str, list[str]]:
-    """`ovon argv` in this process: exit code, stdout, and the lines of stderr that are not warnings."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            rc = ovon(argv)
-        except SystemExit as e:  # argparse
-            rc = int(e.code or 0)
-    out, err = capsys.readouterr()
-    assert "Traceback" not in err and "internal error" not in err, err
-    return rc, out, [ln for ln in err.strip().splitlines() if ln.strip() and not ln.startswith("ovon: warning:")]
-
-
-def one_line(rc: int, errors: list[str], *needles: str) -> str:
-    assert rc == 2 and len(errors) == 1 and errors[0].startswith("ovon: error:"), (rc, errors)
-    for n in needles:
-        assert n in errors[0], (n, errors[0])
-    assert "fix:" in errors[0], errors[0]
-    return errors[0]
 
 
 # -- 15: categories.json contents ----------------------------------------------------------------------
