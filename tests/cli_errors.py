@@ -27,3 +27,14 @@ def one_line(rc: int, errors: list[str], *needles: str) -> str:
         assert n in errors[0], (n, errors[0])
     assert "fix:" in errors[0], errors[0]
     return errors[0]
+
+
+def refused(rc: int, errors: list[str], *needles: str) -> str:
+    """Either kind of one-line refusal: ovon's own (`one_line`), or argparse's for a malformed command line
+    (`ovon CMD: error: ... (see ovon CMD --help)`), whose fix is the help it names."""
+    if not (errors and errors[0].rstrip().endswith("--help)")):
+        return one_line(rc, errors, *needles)
+    assert rc == 2 and len(errors) == 1 and errors[0].startswith("ovon") and ": error:" in errors[0], (rc, errors)
+    for n in needles:
+        assert n in errors[0], (n, errors[0])
+    return errors[0]

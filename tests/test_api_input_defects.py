@@ -68,10 +68,10 @@ def _tiny(**changes: Any):
     ("changes", "source", "needle"),
     [
         ({"num_envs": 0}, {"procedural": "0"}, "num_envs = 0: expected an integer > 0"),
-        ({"lr": -1.0}, {"procedural": "0"}, "lr = -1.0: expected a number > 0"),
+        ({"lr": -1.0}, {"procedural": "0"}, "lr = -1.0: expected a number >= 0"),
         ({"device": "tpu"}, {"procedural": "0"}, "device = 'tpu': expected auto, cpu"),
         ({"algo": "ppo", "num_envs": 2, "ppo.minibatches": 4}, {"procedural": "0"},
-         "ppo.minibatches = 4, num_envs = 2: expected ppo.minibatches <= num_envs"),
+         "ppo.minibatches = 4, num_envs = 2: expected ppo.minibatches <= num_envs for algo ppo"),
         ({}, {"procedural": "0", "limit": -1}, "EpisodeSource(limit=-1): expected an integer > 0"),
         ({}, {"procedural": "0", "limit": 0}, "EpisodeSource(limit=0)"),
         ({}, {"procedural": "0", "task": "imagenav"}, "EpisodeSource(task='imagenav')"),
@@ -136,6 +136,25 @@ def test_the_ppo_minibatch_rule_binds_ppo_only() -> None:
     with pytest.raises(ConfigError, match="ppo.minibatches <= num_envs"):
         check_config(_tiny(algo="ppo", num_envs=1))
     assert check_config(_tiny(algo="ppo", lr=0.0)).lr == 0.0  # a frozen policy: a diagnostic that always ran
+
+
+def test_the_cli_and_python_accept_the_same_train_configs(tmp_path) -> None:
+    """The exceptions `train()` once made by hand (lr 0; DAgger with ppo.minibatches > num_envs) are the
+    config's own domain and rule, so `ovon train --set` accepts them too, and rejects lr < 0 in one line."""
+    from types import SimpleNamespace
+
+    from ovon.train.config import build_config
+
+    def cli(algo: str, *sets: str):
+        return build_config(SimpleNamespace(algo=algo, expert=None, task=None, preset="tiny", policy=None,
+                                            encoder=None, config=None, set=list(sets)))
+
+    cfg = cli("dagger", "lr=0", "num_envs=1")
+    assert cfg.lr == 0.0 and cfg.num_envs == 1 and cfg.ppo.minibatches == 2
+    with pytest.raises(ConfigError, match=r"ppo.minibatches <= num_envs for algo ppo"):
+        cli("ppo", "num_envs=1")
+    with pytest.raises(ConfigError, match=r"lr = -0.5: expected a number >= 0"):
+        cli("dagger", "lr=-0.5")
 
 
 # -- 9: the experts' keyword arguments have their declared domains ------------------------------------------

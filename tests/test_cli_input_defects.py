@@ -242,6 +242,12 @@ def test_video_from_another_folder_finds_the_runs_relative_inputs(tiny_dataset, 
     rc, _, errors = run([*video[:-1], "v2.mp4"], capsys)
     one_line(rc, errors, "data 'data/eps'", str(where / "data" / "eps"), "relative to the folder it ran in")
     assert not (elsewhere / "v2.mp4").exists()
+    # ... and `--data NEW` (as the error's fix says) renders it from where it went
+    rc, out, errors = run([*video[:-1], "v3.mp4", "--data", str(tmp_path / "moved")], capsys)
+    assert rc == 0 and errors == [], errors
+    assert (elsewhere / "v3.mp4").stat().st_size > 0
+    rc, _, errors = run([*video[:-1], "v4.mp4", "--scenes", str(tmp_path / "nowhere")], capsys)
+    one_line(rc, errors, "--scenes", "nowhere")
 
 
 def test_noise_twice_stop_probability_and_negative_house_seed_are_refused():

@@ -4,36 +4,16 @@
 from __future__ import annotations
 
 import json
-import warnings
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from ovon.cli.main import main as ovon
 from ovon.evaluate.harness import load_specs
+from tests.cli_errors import one_line, refused, run
 
 DEEP = "[" * 600 + "]" * 600
-
-
-def run(argv: list[str], capsys) -> tuple[int, str, str]:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            rc = ovon(argv)
-        except SystemExit as e:  # argparse
-            rc = int(e.code or 0)
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
-def assert_one_line_error(rc: int, err: str, *needles: str) -> None:
-    lines = err.strip().splitlines()
-    assert rc == 2, err
-    assert len(lines) == 1 and "error:" in lines[0] and "Traceback" not in err and "internal error" not in err, err
-    for n in needles:
-        assert n in lines[0], (n, lines[0])
 
 
 def _eval(tiny_dataset, tiny_scenes, out, *extra):
@@ -88,7 +68,7 @@ def test_bad_evaluate_arguments_are_one_line_errors_before_any_work(tiny_dataset
         i = argv.index("--agent")
         del argv[i:i + 2]
     rc, _, err = run(argv, capsys)
-    assert_one_line_error(rc, err, *needles)
+    refused(rc, err, *needles)
     assert not out.exists()  # refused before the run folder was touched
 
 
@@ -97,7 +77,7 @@ def test_bad_checkpoints_and_outputs(tiny_dataset, tiny_scenes, tmp_path, capsys
     garbage.write_bytes(b"\x80\x04not a checkpoint")
     rc, _, err = run(_eval(tiny_dataset, tiny_scenes, tmp_path / "r", "--checkpoint", str(garbage))
                      + ["--agent", "policy"], capsys)
-    assert_one_line_error(rc, err, "--checkpoint", "not a checkpoint torch can read")
+    one_line(rc, err, "--checkpoint", "not a checkpoint torch can read")
     truncated = tmp_path / "trunc.pt"
     import torch
 
@@ -105,11 +85,11 @@ def test_bad_checkpoints_and_outputs(tiny_dataset, tiny_scenes, tmp_path, capsys
     truncated.write_bytes(truncated.read_bytes()[:500])
     rc, _, err = run(_eval(tiny_dataset, tiny_scenes, tmp_path / "r", "--checkpoint", str(truncated))
                      + ["--agent", "policy"], capsys)
-    assert_one_line_error(rc, err, "--checkpoint")
+    one_line(rc, err, "--checkpoint")
     f = tmp_path / "afile"
     f.write_text("x")
     rc, _, err = run(_eval(tiny_dataset, tiny_scenes, f), capsys)
-    assert_one_line_error(rc, err, "--out", "existing file")
+    one_line(rc, err, "--out", "existing file")
     assert f.read_text() == "x"
 
 
@@ -125,33 +105,33 @@ def test_bad_dataset_command_arguments(tiny_dataset, tiny_scenes, tmp_path, caps
         (["--config", str(tmp_path / "nope.yaml")], ["--config"]),
     ]:
         rc, _, err = run(gen + extra, capsys)
-        assert_one_line_error(rc, err, *needles)
+        one_line(rc, err, *needles)
         assert not (tmp_path / "g").exists()
     rc, _, err = run(["dataset", "generate", "--scenes", str(tmp_path / "nope"), "--out", str(tmp_path / "g")],
                      capsys)
-    assert_one_line_error(rc, err, "--scenes")
+    one_line(rc, err, "--scenes")
     rc, _, err = run(["dataset", "validate", str(tmp_path / "nope"), "--scenes", str(tiny_scenes)], capsys)
-    assert_one_line_error(rc, err, "DATA")
+    one_line(rc, err, "DATA")
     rc, _, err = run(["dataset", "validate", str(tiny_dataset), "--scenes", str(tiny_scenes),
                       "--max-episodes-per-scene", "0"], capsys)
-    assert_one_line_error(rc, err, "--max-episodes-per-scene")
+    one_line(rc, err, "--max-episodes-per-scene")
     rc, _, err = run(["dataset", "splits", "--vocabulary", "--holdout", "1.5", "--out", str(tmp_path / "c.json")],
                      capsys)
-    assert_one_line_error(rc, err, "--holdout", "(0, 1)")
+    one_line(rc, err, "--holdout", "(0, 1)")
     rc, _, err = run(["dataset", "stats", str(tmp_path / "nope")], capsys)
-    assert_one_line_error(rc, err, "DATA")
+    one_line(rc, err, "DATA")
 
 
 def test_dataset_generate_into_another_generation_is_refused(tiny_dataset, tiny_scenes, capsys):
     rc, _, err = run(["dataset", "generate", "--scenes", str(tiny_scenes), "--out", str(tiny_dataset),
                       "--preset", "fast", "--set", "seed=1", "--no-progress"], capsys)
-    assert_one_line_error(rc, err, "generation.seed 0 -> 1")
+    one_line(rc, err, "generation.seed 0 -> 1")
 
 
 def test_argparse_errors_are_one_line(capsys):
     for argv in (["evaluate"], ["nope"], ["evaluate", "--bogus"], ["dataset"]):
         rc, _, err = run(argv, capsys)
-        assert_one_line_error(rc, err)
+        refused(rc, err)
 
 
 # -- fuzz ------------------------------------------------------------------------------------------------
@@ -199,8 +179,7 @@ def test_fuzz_evaluate_arguments(tiny_dataset, tiny_scenes, tmp_path_factory, ca
                  "--workers", "1", "--set", "task.max_steps=20")
     for s in sets:
         argv += ["--set", s]
-    rc, stdout, err = run(argv, capsys)
-    assert "Traceback" not in err and "internal error" not in err
+    rc, stdout, err = run(argv, capsys)  # run() asserts: no traceback, no internal error
     if _expect_ok(episodes, seeds, splits, sets):
         assert rc == 0, err
         summary = json.loads((Path(out) / "summary.json").read_text())
@@ -209,7 +188,7 @@ def test_fuzz_evaluate_arguments(tiny_dataset, tiny_scenes, tmp_path_factory, ca
             available = len(load_specs(str(tiny_dataset), str(tiny_scenes), split, None))
             assert summary["splits"][split]["episodes"] == min(int(float(episodes)), available) * n_seeds
     else:
-        assert_one_line_error(rc, err)
+        refused(rc, err)
 
 
 @pytest.mark.parametrize("args,needle", [(["--hfov", "180"], "--hfov = 180.0"), (["--width", "0"], "--width = 0"),

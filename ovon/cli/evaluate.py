@@ -74,6 +74,8 @@ def register(sub) -> None:
     v.add_argument("--split")
     v.add_argument("--seed")
     v.add_argument("--scene", help="part of the scene path (episode ids are unique per scene only)")
+    v.add_argument("--data", help="episode dataset root, when it moved since the evaluation (default: the run's)")
+    v.add_argument("--scenes", help="scenes root, when it moved since the evaluation (default: the run's)")
     v.add_argument("--fps", default=8)
     v.add_argument("--no-agent-view", action="store_true",
                    help="leave out the panel of what the agent believes (agents with debug_frame, e.g. vlfm)")
@@ -226,6 +228,8 @@ class VideoArgs:
     episode: str = non_empty("", flag="--episode")
     seed: int | None = non_negative(None, flag="--seed")
     fps: int = in_range(8, 1, 120, flag="--fps")
+    data: str = existing_dir("", optional=True, flag="--data")
+    scenes: str = existing_dir("", optional=True, flag="--scenes")
 
 
 def cmd_report(args) -> int:
@@ -260,6 +264,6 @@ def cmd_video(args) -> int:
 
     a = from_args(VideoArgs, args)
     path = render_video(a.run, a.episode, args.out, split=args.split, seed=a.seed, fps=a.fps, scene=args.scene,
-                        agent_view=not args.no_agent_view)
+                        agent_view=not args.no_agent_view, data=a.data or None, scenes=a.scenes or None)
     print(f"video: {path}")
     return 0

@@ -140,7 +140,9 @@ def resolve_split_dir(root: str | Path, split: str) -> Path:
         else []
     raise FileNotFoundError(
         f"split {split!r} not found: tried {', '.join(str(c) for c in cand)}; "
-        + (f"splits present under {root}: {present}" if root.is_dir() else f"{root} does not exist")
+        + (f"splits present under {root}: {present}; fix: name one of them (--splits), or point --data at the "
+           "dataset root that holds the split's folder" if root.is_dir()
+           else f"{root} does not exist; fix: point --data at the dataset root (it holds val_seen/ ...)")
     )
 
 

@@ -141,7 +141,8 @@ def run_input(run_dir: Path, meta: dict, key: str, given: str | None = None) -> 
     if recorded:
         raise FileNotFoundError(f"{run_dir}/run.json: {key} {stored!r} was {recorded} when the evaluation ran "
                                 f"(relative to the folder it ran in), and that no longer exists; fix: put it back "
-                                f"at {recorded} (or give render_video its new path: {key}=...)")
+                                f"at {recorded}, or pass its new path (`ovon video --{key} PATH`, "
+                                f"render_video({key}=...))")
     if not Path(stored).exists():
         raise FileNotFoundError(f"{run_dir}/run.json: {key} {stored!r} is relative to the folder `ovon evaluate` "
                                 f"ran in and does not exist from {Path.cwd()}; fix: run `ovon video` from that "

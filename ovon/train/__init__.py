@@ -6,13 +6,12 @@ its run folder (`folder.py`): identity, one writer at a time, resume rules, whoe
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
 
 from ovon.task.episode import EpisodeSpec
-from ovon.train.config import PRESETS, PPOConfig, TrainConfig, build_config, train_preset
+from ovon.train.config import PRESETS, TrainConfig, build_config, train_preset
 from ovon.train.folder import EpisodeSource, open_run_folder, resolve_episodes
 
 _FIX_CFG = "fix: build it with train_preset(NAME, ...) or build_config(...)"
@@ -22,25 +21,12 @@ def check_config(cfg: TrainConfig) -> TrainConfig:
     """`cfg` checked as `ovon train` checks it (`ovon.config.base.validate`: declared domains and rules),
     returned with path objects stored as str. Why in `train()`: a config built in Python (`train_preset("tiny",
     num_envs=0)`, `dataclasses.replace(cfg, lr=-1)`) used to fail inside torch after the run folder was
-    written, and the corrected call was then refused as a different run.
-
-    Two values outside the declared domains stay allowed, as they always ran on purpose: `lr` 0 (a frozen
-    policy: the diagnostic runs of tests/test_train_rl.py; the fine-tune lrs already allow 0), and, for BC /
-    DAgger, `ppo.minibatches > num_envs` (a PPO setting they never read; its own domain still holds)."""
+    written, and the corrected call was then refused as a different run."""
     from ovon.config.base import ConfigError, validate
 
     if not isinstance(cfg, TrainConfig):
         raise ConfigError(f"train(cfg={type(cfg).__name__}): expected a TrainConfig; {_FIX_CFG}")
-    relaxed: dict = {}
-    if type(cfg.lr) in (int, float) and cfg.lr == 0:
-        relaxed["lr"] = 1.0
-    if cfg.algo in ("bc", "dagger") and isinstance(cfg.ppo, PPOConfig):
-        validate(cfg.ppo, "ppo")
-        relaxed["ppo"] = dataclasses.replace(cfg.ppo, minibatches=1)
-    if not relaxed:
-        return validate(cfg)
-    checked = validate(dataclasses.replace(cfg, **relaxed))
-    return dataclasses.replace(checked, **{k: getattr(cfg, k) for k in relaxed})
+    return validate(cfg)
 
 
 def check_source(specs: object) -> None:

@@ -150,7 +150,7 @@ class TrainConfig:
     total_steps: int = positive(150_000_000)
     max_updates: int = non_negative(0)
     # Optimiser.
-    lr: float = positive(2.5e-4)
+    lr: float = non_negative(2.5e-4)  # 0 = a frozen policy (the ratio-1 diagnostic of PPO)
     adam_eps: float = positive(1e-5)
     max_grad_norm: float = positive(0.2)
     # Imitation (BC, DAgger): weight of the STOP class in the cross-entropy. STOP is ~1% of the labels
@@ -174,7 +174,9 @@ class TrainConfig:
     text_cache: str = ""  # .pt table {text: embedding}; "" = <out>/text_cache.pt
     progress: bool = True
     rules: ClassVar = (
-        less("ppo.minibatches", "num_envs", strict=False),  # a minibatch holds whole envs
+        # a PPO minibatch holds whole envs; BC and DAgger never read `ppo`
+        rule(("algo", "ppo.minibatches", "num_envs"), lambda a, m, n: a != "ppo" or m <= n,
+             "ppo.minibatches <= num_envs for algo ppo"),
         rule(("task.kind", "algo"), lambda k, a: k != "pointnav" or a == "ppo",
              "algo ppo for task.kind pointnav (there is no PointNav expert)"),
         rule(("task.kind", "encoder.image", "policy.goal_similarity"),
