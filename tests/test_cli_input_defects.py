@@ -243,6 +243,11 @@ def test_video_from_another_folder_finds_the_runs_relative_inputs(tiny_dataset, 
     one_line(rc, errors, "data 'data/eps'", str(where / "data" / "eps"), "relative to the folder it ran in")
     assert not (elsewhere / "v2.mp4").exists()
     # ... and `--data NEW` (as the error's fix says) renders it from where it went
+    # a whole project moved (the recorded absolute path gone): its relative path from the new root works
+    shutil.copytree(tmp_path / "moved", elsewhere / "data" / "eps")
+    rc, out, errors = run([*video[:-1], "v5.mp4"], capsys)
+    assert rc == 0 and errors == [], errors
+    shutil.rmtree(elsewhere / "data")
     rc, out, errors = run([*video[:-1], "v3.mp4", "--data", str(tmp_path / "moved")], capsys)
     assert rc == 0 and errors == [], errors
     assert (elsewhere / "v3.mp4").stat().st_size > 0

@@ -280,6 +280,7 @@ def test_policy_agent_sampling_temperature(tmp_path) -> None:
         return [agent.act(f) for f in frames]
 
     greedy = run(PolicyAgent(str(tmp_path / "p.pt"), deterministic=True))
+    assert run(PolicyAgent(tmp_path / "p.pt", device=torch.device("cpu"))) == greedy  # what torch code passes
     assert run(PolicyAgent(str(tmp_path / "p.pt"), deterministic=False, temperature=1e-4)) == greedy
     hot = PolicyAgent(str(tmp_path / "p.pt"), deterministic=False, temperature=50.0)
     assert run(hot, 3) == run(hot, 3)

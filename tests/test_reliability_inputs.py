@@ -143,6 +143,28 @@ def test_strict_refuses_an_invalid_episode_naming_file_and_episode(data, tiny_sc
     assert not out.exists()
 
 
+def _floating(d: dict) -> None:
+    d["episodes"][1]["start_position"][1] += 0.6  # navigable x, z; 0.6 m above the floor
+
+
+def test_a_start_floating_above_its_floor_is_one_rule_for_validate_evaluate_and_the_env(data, tiny_scenes, tmp_path,
+                                                                                       capsys):
+    """The env refuses a start more than 0.5 m from its floor's surface; the off-map filter and `dataset
+    validate` apply the same rule (`SceneNav.start_problem`), so such an episode is counted as skipped
+    instead of failing the evaluation in the middle of its unit."""
+    shard = _mutate(data, _floating)
+    eid = json.loads(gzip.decompress(shard.read_bytes()))["episodes"][1]["episode_id"]
+    out = tmp_path / "run"
+    rc, _, errors = run(_evaluate(data, tiny_scenes, out), capsys)
+    assert rc == 0, errors
+    entry = json.loads((out / "summary.json").read_text())["splits"]["val_seen"]
+    assert entry["skipped"]["reasons"] == {"start_off_map": 1} and entry["episodes"] == _episodes(data) - 1
+    rc, _, errors = run(_evaluate(data, tiny_scenes, tmp_path / "strict", "--strict"), capsys)
+    one_line(rc, errors, str(shard), f"episode {eid!r}", "from its floor's surface")
+    rc, out_text, _ = run(["dataset", "validate", str(data), "--scenes", str(tiny_scenes)], capsys)
+    assert rc != 0 and "from its floor's surface" in out_text
+
+
 # -- episode files: absurd positions, string numbers, corrupt categories.json ------------------------------
 @pytest.mark.parametrize("key", ["start_position", "view_point"])
 def test_a_huge_position_is_one_line_naming_file_and_key(data, tiny_scenes, tmp_path, capsys, key):

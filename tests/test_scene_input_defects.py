@@ -91,11 +91,20 @@ def test_d5_instance_id_beyond_int32_names_file_line_and_value(tmp_path: Path, c
     assert parse_semantic_txt(folder / "FixtureScn01.semantic.txt")[0].id == 2**31 - 1  # the largest id is fine
 
 
-def test_d6_two_instances_with_one_colour_name_both_lines(tmp_path: Path) -> None:
-    folder = _fixture(tmp_path, (HEADER + '1,9A9CAA,"couch",0\n2,9a9caa,"dining table",1\n').encode())
-    with pytest.raises(SceneFileError) as e:
-        load_scene(folder)
-    _one_line(e.value, "FixtureScn01.semantic.txt:3", "9A9CAA", "instance 1 on line 2", "instance 2")
+def test_d6_two_instances_with_one_colour_load_as_habitat_reads_them(tmp_path: Path) -> None:
+    """habitat-sim's HM3D loader keeps the first line of a colour (a std::map insert): the later instance gets
+    no faces. ovon does the same and says so, instead of refusing a label table habitat reads, or (as it
+    once did) silently giving the faces to the later instance."""
+    plain = {o.id: o for o in load_scene(_fixture(tmp_path / "a")).objects}
+    folder = _fixture(tmp_path / "b", (HEADER + '1,9A9CAA,"couch",0\n2,9a9caa,"dining table",1\n').encode())
+    with pytest.warns(SceneLoadWarning) as said:
+        scene = load_scene(folder)
+    line = next(str(w.message) for w in said if "share a colour" in str(w.message))
+    assert "FixtureScn01.semantic.txt" in line and "instance 2 ('dining table', colour 9A9CAA) with instance 1" in line
+    objects = {o.id: o for o in scene.objects}
+    assert 2 not in objects and objects[1].raw_label == "couch"
+    np.testing.assert_array_equal(objects[1].aabb_min, plain[1].aabb_min)
+    np.testing.assert_array_equal(objects[1].aabb_max, plain[1].aabb_max)
 
 
 def test_d7_byte_order_mark_is_accepted(tmp_path: Path) -> None:
@@ -170,9 +179,11 @@ def test_d8_grid_frame_refuses_a_grid_beyond_its_cell_cap() -> None:
         ("nan_scale", lambda d: d["nodes"][0].update(scale=[1, float("nan"), 1]), ("node 0", "scale", "finite")),
         ("nan_matrix", lambda d: d["nodes"][0].update(matrix=[1, 0, 0, 0] * 3 + [float("inf"), 0, 0, 1]),
          ("node 0", "matrix", "finite")),
-        ("zero_matrix", lambda d: d["nodes"][0].update(matrix=[0] * 16), ("node 0", "singular")),
-        ("zero_scale", lambda d: d["nodes"].append({"mesh": 0, "scale": [1, 0, 1], "name": "flat"})
-         or d["scenes"][0]["nodes"].append(1), ("node 1 ('flat')", "singular")),
+        ("zero_matrix", lambda d: d["nodes"][0].update(matrix=[0] * 16), ("every node with a mesh", "node 0",
+                                                                         "singular")),
+        ("zero_scales", lambda d: d["nodes"][0].update(scale=[1, 0, 1]) or d["nodes"].append(
+            {"mesh": 0, "scale": [0, 0, 0], "name": "flat"}) or d["scenes"][0]["nodes"].append(1),
+         ("every node with a mesh", "singular")),
         ("bad_rotation", lambda d: d["nodes"][0].update(rotation=[0, 0, 0, 3]), ("node 0", "unit quaternion")),
         ("float_indices", lambda d: d["accessors"][1].update(componentType=5126),
          ("mesh 0 primitive 0", "componentType 5126 (float)", "5125 (unsigned int)")),
@@ -197,6 +208,23 @@ def test_d9_transform_overflowing_float32_is_refused(tmp_path: Path) -> None:
         with pytest.raises(SceneFileError) as e:
             load_scene(path)
     _one_line(e.value, "huge.glb", "mesh 0 primitive 0", "overflow to infinity")
+
+
+def test_d9_a_zero_scale_node_is_hidden_not_an_error(tmp_path: Path) -> None:
+    """Exporters hide a node by scaling it to 0 (valid glTF): its mesh is skipped with a note, and the
+    scene loads as without it; only a scene whose every mesh node is singular is refused (test above)."""
+    def hide(d: dict) -> None:
+        d["nodes"].append({"mesh": 0, "scale": [0, 0, 0], "translation": [50, 0, 50], "name": "hidden"})
+        d["scenes"][0]["nodes"].append(1)
+
+    plain = load_scene(_edited_glb(tmp_path / "plain.glb", lambda d: None))
+    path = _edited_glb(tmp_path / "hidden.glb", hide)
+    with pytest.warns(UserWarning, match=r"skipped 1 node\(s\) with a singular \(zero-scale: hidden\) transform: "
+                                         r"node 1 \('hidden'\)"):
+        scene = load_scene(path)
+    np.testing.assert_array_equal(scene.mesh.vertices, plain.mesh.vertices)
+    np.testing.assert_array_equal(scene.mesh.faces, plain.mesh.faces)
+    assert preflight_scene(path)["visual"] == path
 
 
 def test_d9_mm_to_m_node_scale_is_not_singular(tmp_path: Path) -> None:

@@ -35,8 +35,8 @@ class PolicyAgentArgs:
 
 
 class PolicyAgent:
-    def __init__(self, checkpoint: str, deterministic: bool = True, device: str = "cpu", threads: int = 1,
-                 temperature: float = 1.0) -> None:
+    def __init__(self, checkpoint: str, deterministic: bool = True, device: str | torch.device = "cpu",
+                 threads: int = 1, temperature: float = 1.0) -> None:
         """`deterministic`: argmax actions; else sample from softmax(logits / temperature) with a generator
         seeded per episode (reproducible). Argmax can lock an imitation policy into a turn-left /
         turn-right cycle; sampling breaks it, and a temperature < 1 keeps rare actions (STOP) rare."""
@@ -44,6 +44,8 @@ class PolicyAgent:
         from ovon.models.encoders import TableTextEncoder
         from ovon.models.policy import ActorCritic
 
+        if isinstance(device, torch.device):  # what torch code passes; the option's domain is its str
+            device = str(device)
         with values_from_option("--agent-arg"):  # a real bool, a finite temperature > 0, ...: one line each
             validate(PolicyAgentArgs(deterministic, device, threads, temperature))
         if threads > 0:

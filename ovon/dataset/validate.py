@@ -165,11 +165,8 @@ def split_problem(ds: EpisodeDataset) -> str | None:
 
 
 def start_problem(nav, position: Iterable[float]) -> str | None:
-    """Why a start position is not on the navigable map of the scene (`SceneNav`), or None."""
-    p = np.asarray(list(position), dtype=np.float64)
-    if not nav.is_navigable(p):
-        return f"start {p.round(3).tolist()} is not on the navigable map"
-    return None
+    """Why an episode may not start at `position` in the scene (`SceneNav.start_problem`), or None."""
+    return nav.start_problem(np.asarray(list(position), dtype=np.float64))
 
 
 _NAV_MEMO: dict[tuple, object] = {}
@@ -193,11 +190,12 @@ def scene_navigation(scene_path: str, agent: AgentConfig, nav: NavConfig):
 
 
 def off_map_starts_job(job: dict) -> dict:
-    """Worker job: indices of `job["starts"]` that are off the scene's navigable map."""
+    """Worker job: [index, why] of the `job["starts"]` no episode may start at (`start_problem`)."""
     from ovon.config.base import from_dict
 
     nav = scene_navigation(job["scene"], from_dict(AgentConfig, job["agent"]), from_dict(NavConfig, job["nav"]))
-    return {"scene": job["scene"], "bad": [i for i, p in enumerate(job["starts"]) if start_problem(nav, p)]}
+    why = [start_problem(nav, p) for p in job["starts"]]
+    return {"scene": job["scene"], "bad": [[i, w] for i, w in enumerate(why) if w]}
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -233,18 +233,17 @@ def drop_off_map_starts(sel: SplitEpisodes, sim: SimConfig, workers: int = 1, ex
             by_scene.setdefault(s.scene, []).append(i)
     jobs = [{"scene": sc, "starts": [[float(x) for x in specs[i].start_position] for i in idx],
              "agent": to_dict(sim.agent), "nav": to_dict(sim.nav)} for sc, idx in sorted(by_scene.items())]
-    bad: set[int] = set()
+    bad: dict[int, str] = {}
     # A pool costs seconds to start: worth it only when there are many scenes to load.
     many = len(jobs) > 4
     for res in run_jobs(off_map_starts_job, jobs, workers if many else 1, executor if many else "process"):
         idx = by_scene[res["scene"]]
-        bad.update(idx[j] for j in res["bad"])
+        bad.update((idx[j], why) for j, why in res["bad"])
     if bad and strict:
         i = min(bad)
         s = specs[i]
-        start = [round(float(x), 3) for x in s.start_position]
-        raise DatasetError(f"{sel.shards[i]}: episode {s.episode_id!r}: start {start} is not on the navigable map of "
-                           f"{s.scene} (agent radius {sim.agent.radius} m); {strict_fix(data, scenes)}")
+        raise DatasetError(f"{sel.shards[i]}: episode {s.episode_id!r}: {bad[i]} of {s.scene} (agent radius "
+                           f"{sim.agent.radius} m); {strict_fix(data, scenes)}")
     keep = [i for i in range(len(specs)) if i not in bad]
     skipped = sel.skipped + Counter({"start_off_map": len(bad)})
     return SplitEpisodes([specs[i] for i in keep], [sel.shards[i] for i in keep], sel.picked, skipped)

@@ -125,7 +125,8 @@ def run_input(run_dir: Path, meta: dict, key: str, given: str | None = None) -> 
     """Where the run's input `key` ("data" or "scenes") is now. `given` (the caller's) wins. run.json keeps
     the path as `ovon evaluate` was given it: a relative one is relative to the folder that command ran
     in, not to where `ovon video` runs, so it is taken from run_identity.json, which records each input's
-    absolute path (`ovon.runfolder.path_identity`). Run folders without one read it from here."""
+    absolute path (`ovon.runfolder.path_identity`). Run folders without one, and projects moved since
+    (the recorded path gone), read it from here."""
     if given:
         return str(given)
     stored = str(meta.get(key) or "")
@@ -138,6 +139,8 @@ def run_input(run_dir: Path, meta: dict, key: str, given: str | None = None) -> 
         recorded = ""
     if recorded and Path(recorded).exists():
         return recorded
+    if recorded and Path(stored).exists():  # the project moved with its run folders: run from its new root
+        return stored
     if recorded:
         raise FileNotFoundError(f"{run_dir}/run.json: {key} {stored!r} was {recorded} when the evaluation ran "
                                 f"(relative to the folder it ran in), and that no longer exists; fix: put it back "

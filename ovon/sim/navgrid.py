@@ -60,6 +60,7 @@ from ovon.sim.los import los_between
 MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
 MIN_COVERED_FRACTION = 0.5  # no-hint mode: a floor has a ceiling over most of it; roofs do not
 ELEVATED_M = 0.3  # islands whose median surface is this far above the floor are furniture tops
+START_HEIGHT_TOLERANCE_M = 0.5  # a given start's y may differ this much from its floor's surface
 VERTICAL_TOL = 1e-6  # |normal_y| / |normal| below this: a vertical triangle, never a surface sample
 _uid_counter = itertools.count(1)
 
@@ -391,6 +392,23 @@ class SceneNav:
 
     def is_navigable(self, xyz) -> bool:
         return bool(self.floors) and self.grid_for(xyz).is_navigable(xyz)
+
+    def start_problem(self, xyz) -> str | None:
+        """Why an episode may not start at `xyz`, or None: its x, z must be navigable on its floor and its y
+        within START_HEIGHT_TOLERANCE_M of that floor's surface there (else the agent renders floating or
+        sunk). The one rule of the dataset validator, the evaluation's off-map filter and the env's reset."""
+        p = np.asarray(xyz, dtype=np.float64)
+        shown = p.round(3).tolist()
+        if not self.floors:
+            return f"start {shown}: the scene has no navigable floor"
+        grid = self.grid_for(p)
+        if not grid.is_navigable(p):
+            return f"start {shown} is not on the navigable map (floor {grid.floor})"
+        surface = float(grid.cell_to_world(*grid.world_to_cell(p))[1])
+        if not abs(p[1] - surface) <= START_HEIGHT_TOLERANCE_M:
+            return (f"start {shown} is {p[1] - surface:+.2f} m from its floor's surface (y {surface:.3f} on floor "
+                    f"{grid.floor}; at most {START_HEIGHT_TOLERANCE_M} m)")
+        return None
 
     def snap(self, xyz) -> np.ndarray:
         return self.grid_for(xyz).snap(xyz)

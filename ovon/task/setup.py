@@ -18,6 +18,7 @@ from ovon.config.task import TaskConfig
 from ovon.lru import LRU
 from ovon.scenes.model import footprint_distance
 from ovon.sim.geodesic import CACHE_SIZE, DistanceField, distance_field
+from ovon.sim.navgrid import START_HEIGHT_TOLERANCE_M
 from ovon.sim.types import AgentState
 from ovon.sim.world import World
 from ovon.task.episode import EpisodeSpec, GoalViewpoint
@@ -29,7 +30,6 @@ _ADHOC = LRU(CACHE_SIZE)  # (grid uids, goal object ids) -> (grid, points, viewp
 # goal sets thousands of times and rebuilding the list cost ~0.05 ms per PPO step. Keyed by the world itself
 # (weakly), not by its grids: worlds of the same geometry share grids but may hold other objects.
 _DISTRACTORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-START_HEIGHT_TOLERANCE_M = 0.5  # a given start's y may differ this much from its floor's surface
 
 
 @dataclass
@@ -92,7 +92,7 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
 def check_start(world: World, spec: EpisodeSpec) -> np.ndarray | None:
     """The spec's given start position as floats (None: a random start), refused (one-line ValueError
     naming the episode and the value) unless it and the start yaw are finite and the position lies on
-    the navigable map of its floor, as the dataset validator requires (`ovon.dataset.validate.start_problem`):
+    the navigable map of its floor (`SceneNav.start_problem`, the dataset validator's rule too):
     off the map the agent renders from outside the building and the goal distance is inf, which no
     metric reports."""
     where = f"episode {spec.episode_id!r} in scene {spec.scene!r}"
@@ -109,19 +109,16 @@ def check_start(world: World, spec: EpisodeSpec) -> np.ndarray | None:
     if pos.shape != (3,) or not np.isfinite(pos).all():
         raise ValueError(f"{where}: start (x, y, z) = {spec.start_position!r}: expected 3 finite numbers; fix: give "
                          "a start on the scene's navigable floor, or none for a random one")
-    shown = pos.round(3).tolist()
+    why = world.nav.start_problem(pos)
+    if why is None:
+        return pos
     if not world.nav.floors:
-        raise ValueError(f"{where}: start {shown}: the scene has no navigable floor; fix: check the scene's mesh "
-                         "and the agent's size (sim.agent)")
-    grid = world.nav.grid_for(pos)
-    surface = grid.cell_to_world(*grid.world_to_cell(pos))[1]  # the floor's height there (nominal off the grid)
-    if not (grid.is_navigable(pos) and abs(pos[1] - surface) <= START_HEIGHT_TOLERANCE_M):
-        near = grid.snap(pos)  # nan when this floor has no navigable cell
-        hint = f"e.g. the nearest navigable point {near.round(3).tolist()}" if np.isfinite(near).all() else "elsewhere"
-        raise ValueError(f"{where}: start (x, y, z) = {shown} is not on the navigable map (floor {grid.floor}, "
-                         f"agent radius {world.nav.agent.radius} m); expected a navigable x, z with y within "
-                         f"{START_HEIGHT_TOLERANCE_M} m of that floor's surface; fix: start there, {hint}, or give "
-                         "no start for a random one")
+        raise ValueError(f"{where}: {why}; fix: check the scene's mesh and the agent's size (sim.agent)")
+    near = world.nav.snap(pos)  # nan when this floor has no navigable cell
+    hint = f"e.g. the nearest navigable point {near.round(3).tolist()}" if np.isfinite(near).all() else "elsewhere"
+    raise ValueError(f"{where}: {why}; expected a navigable x, z (agent radius {world.nav.agent.radius} m) with y "
+                     f"within {START_HEIGHT_TOLERANCE_M} m of that floor's surface; fix: start there, {hint}, or give "
+                     "no start for a random one")
     return pos
 
 

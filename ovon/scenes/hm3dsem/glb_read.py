@@ -282,24 +282,22 @@ def _node_matrix(node: dict, path: Path = Path("?"), ni: int = -1) -> np.ndarray
     return m
 
 
-def _check_world(path: Path, ni: int, node: dict, world: np.ndarray) -> None:
-    """Refuse the world transform of a node carrying a mesh when it is not finite (overflow of huge
-    scales) or singular: a zero determinant flattens the mesh to a plane, line or point, a scene that
-    loads with no floor and no walls instead of an error."""
+def _check_world(path: Path, ni: int, node: dict, world: np.ndarray) -> bool:
+    """Whether the world transform of a node carrying a mesh draws it: False when it is singular (zero
+    scale: exporters hide nodes that way, and glTF allows it), an error when it is not finite (overflow of
+    huge scales)."""
     if not np.isfinite(world).all():
         raise SceneFileError(path, f"{_node_name(ni, node)}: its world transform (with its parents') is not finite",
                              "fix: repair the node transforms or re-export the mesh")
     sv = np.linalg.svd(world[:3, :3], compute_uv=False)
-    if sv[0] == 0.0 or sv[-1] < _SINGULAR_RATIO * sv[0]:
-        raise SceneFileError(path, f"{_node_name(ni, node)}: its transform (with its parents') is singular "
-                                   f"(determinant {np.linalg.det(world[:3, :3]):.3g}): it flattens the mesh to a "
-                                   "plane, line or point", "fix: give the node an invertible matrix / non-zero "
-                                   "scale, or re-export the mesh")
+    return not (sv[0] == 0.0 or sv[-1] < _SINGULAR_RATIO * sv[0])
 
 
-def _node_order(doc: dict, path: Path = Path("?")) -> list[tuple[int, np.ndarray]]:
-    """(node index, world matrix) of every node reachable from the default scene, parents first; the
-    world matrices of nodes with a mesh are checked (`_check_world`)."""
+def _node_order(doc: dict, path: Path = Path("?"), notes: list[str] | None = None) -> list[tuple[int, np.ndarray]]:
+    """(node index, world matrix) of every node reachable from the default scene whose mesh is drawn (and of
+    the nodes without a mesh), parents first. A mesh node with a singular transform (zero scale: hidden) is
+    left out with a note; when every mesh node is, the scene is refused: it would load with no floor and no
+    walls instead of an error."""
     nodes = doc.get("nodes", [])
     scenes = doc.get("scenes")
     if scenes:
@@ -309,18 +307,30 @@ def _node_order(doc: dict, path: Path = Path("?")) -> list[tuple[int, np.ndarray
         roots = [i for i in range(len(nodes)) if i not in children]
     stack: list[tuple[int, np.ndarray, int]] = [(r, np.eye(4), 0) for r in reversed(roots)]
     order: list[tuple[int, np.ndarray]] = []
+    hidden: list[int] = []
     while stack:
         ni, parent, depth = stack.pop()
         if depth > 256:
             raise ValueError("node hierarchy deeper than 256 levels (a cycle?)")
         world = parent @ _node_matrix(nodes[ni], path, ni)
-        if nodes[ni].get("mesh") is not None:
-            _check_world(path, ni, nodes[ni], world)
-        order.append((ni, world))
+        if nodes[ni].get("mesh") is not None and not _check_world(path, ni, nodes[ni], world):
+            hidden.append(ni)
+        else:
+            order.append((ni, world))
         for c in reversed(nodes[ni].get("children", [])):
             stack.append((c, world, depth + 1))
     if not nodes and doc.get("meshes"):
         order = [(-1, np.eye(4))]
+    if hidden:
+        if not any(ni < 0 or nodes[ni].get("mesh") is not None for ni, _ in order):
+            ni = hidden[0]
+            raise SceneFileError(path, f"every node with a mesh has a singular transform (with its parents'), e.g. "
+                                       f"{_node_name(ni, nodes[ni])}: it flattens the scene to a plane, line or "
+                                       "point", "fix: give the nodes invertible matrices / non-zero scales, or "
+                                       "re-export the mesh")
+        if notes is not None:
+            shown = ", ".join(_node_name(ni, nodes[ni]) for ni in hidden[:3]) + (", ..." if len(hidden) > 3 else "")
+            notes.append(f"skipped {len(hidden)} node(s) with a singular (zero-scale: hidden) transform: {shown}")
     return order
 
 
@@ -448,7 +458,7 @@ def read_primitives(path: Path) -> tuple[list[_Primitive], list[str], dict]:
     notes: list[str] = []
     prims: list[_Primitive] = []
     try:
-        for ni, world in _node_order(doc, path):
+        for ni, world in _node_order(doc, path, notes):
             mesh_index = doc["nodes"][ni].get("mesh") if ni >= 0 else 0
             if mesh_index is None:
                 continue

@@ -30,6 +30,7 @@ from ovon.scenes.hm3dsem.semantic_txt import (
     SemanticEntry,
     _hex,
     parse_semantic_txt,
+    shadowed_entries,
 )
 from ovon.scenes.hm3dsem.sidecar import read_sidecar
 from ovon.scenes.hm3dsem.upaxis import configured_up, frame_rotation, parse_up, rotate_mesh, rotation_warning
@@ -303,7 +304,15 @@ def _semantic(
     notes: Notes = [(files["semantic"], n) for n in read_notes]
     if not sem_prims:
         raise ValueError(f"{files['semantic']}: the semantic mesh has no triangles")
-    color_to_id = {e.color: e.id for e in entries}
+    color_to_id, shadowed = shadowed_entries(entries)
+    if shadowed:
+        e, first = shadowed[0]
+        notes.append((
+            files["semantic_txt"],
+            f"{len(shadowed)} instance(s) share a colour with an earlier line, e.g. instance {e.id} "
+            f"({e.raw_label!r}, colour {_hex(e.color)}) with instance {first}: the earlier one keeps the faces of "
+            "that colour (as habitat-sim reads it), these have none and are left out",
+        ))
     face_rgb, _how = _semantic_face_colors(sem_prims)
     face_ids, unknown, missing = _decode_face_ids(face_rgb, color_to_id)
     if unknown:

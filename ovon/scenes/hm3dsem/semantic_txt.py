@@ -78,8 +78,8 @@ def parse_semantic_txt(path: Path) -> list[SemanticEntry]:
     """Parse an HM3DSem semantic.txt; a malformed line is an error naming the file and line.
 
     Also errors, as each would give a silently wrong scene: an id or region id outside int32 (ids live in
-    int32 arrays), an id defined twice, and a colour given to two instances (colours map semantic-mesh
-    faces to ids, so one of the two instances would lose all its faces).
+    int32 arrays) and an id defined twice. A colour given to two instances is kept (habitat-sim reads such
+    files): the loader gives its faces to the first (`shadowed_entries`) and says so.
     """
     data = read_bytes(path)
     if b"\x00" in data[:4096] and not data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
@@ -88,7 +88,6 @@ def parse_semantic_txt(path: Path) -> list[SemanticEntry]:
     text = _decode(path, data)
     entries: list[SemanticEntry] = []
     seen: dict[int, int] = {}
-    by_color: dict[tuple[int, int, int], tuple[int, int]] = {}  # colour -> (line, id)
     for lineno, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
@@ -114,14 +113,17 @@ def parse_semantic_txt(path: Path) -> list[SemanticEntry]:
         seen[iid] = lineno
         h = m.group(2)
         color = (int(h[0:2], 16), int(h[2:4], 16), int(h[4:6], 16))
-        if color in by_color:
-            first, other = by_color[color]
-            raise SceneFileError(
-                f"{path}:{lineno}",
-                f"colour {h.upper()} of instance {iid} is already the colour of instance {other} on line {first}: "
-                "the semantic mesh's faces of that colour cannot tell the two apart",
-                "fix: give every instance its own colour (and paint its faces in it in the semantic mesh)",
-            )
-        by_color[color] = (lineno, iid)
         entries.append(SemanticEntry(iid, color, m.group(3), region))
     return entries
+
+
+def shadowed_entries(entries: list[SemanticEntry]) -> tuple[dict[tuple[int, int, int], int], list[tuple]]:
+    """(colour -> id, [(entry, id of the earlier entry with its colour)]): as habitat-sim's HM3D loader,
+    the first line with a colour keeps it (its faces); a later line with the same colour gets no faces."""
+    color_to_id: dict[tuple[int, int, int], int] = {}
+    shadowed = []
+    for e in entries:
+        first = color_to_id.setdefault(e.color, e.id)
+        if first != e.id:
+            shadowed.append((e, first))
+    return color_to_id, shadowed
