@@ -309,6 +309,8 @@ def test_finetune_schedule_matches_baselines() -> None:
     assert finetune_lrs(ft, 5000) == pytest.approx((1.5e-5, 1.5e-5))
     half = dataclasses.replace(ft, scale=0.5)
     assert finetune_lrs(half, 500) == pytest.approx((1.5e-5, 1.5e-5))
+    step = dataclasses.replace(ft, critic_decay_start=500, critic_decay_end=500)  # allowed: a step at 500
+    assert finetune_lrs(step, 499)[0] == 2.5e-4 and finetune_lrs(step, 500)[0] == pytest.approx(1.5e-5)
 
 
 def test_paper_preset_has_upstream_hyperparameters() -> None:

@@ -40,6 +40,15 @@ class Rollout:
     prefix: int = 0  # leading steps of images/goals/prevs/starts that precede the chunk (context only)
 
 
+def acting_context(policy_cfg) -> int:
+    """How many steps before a step a KV-cached transformer's acting reads: layers x (context - 1), since
+    each layer's keys were computed when their step was acted, from that step's own window. An update that
+    prepends this many steps to a chunk computes the logits acting computed. ("recompute" acting re-runs
+    only the last `context` steps each step, which no single forward over a sequence equals beyond one layer;
+    `behaviour_kl` shows the difference.) 0 for the LSTM, whose memory is its state (`Rollout.state0`)."""
+    return policy_cfg.layers * (policy_cfg.context - 1) if policy_cfg.core == "transformer" else 0
+
+
 class RolloutCollector:
     """Acts in `envs`, starting from `batch` (the envs' current observation)."""
 

@@ -96,6 +96,8 @@ class TrainEnvs:
     def step(self, actions: torch.Tensor | np.ndarray) -> Batch:
         acts = np.asarray(actions).reshape(-1).astype(np.int64)
         obs, reward, term, trunc, infos = self.vec.step(acts)
+        # A time-limit truncation ends the return like a STOP (no bootstrap from the final observation), as
+        # habitat-baselines' DD-PPO does (its masks are `not done`); the paper's RL numbers come from that.
         done = term | trunc
         return self._batch(obs, reward, done, done, infos)
 

@@ -28,7 +28,7 @@ import torch
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
 from ovon.train.batches import episode_summary, features, imitation_loss, map_images
-from ovon.train.collect import RolloutCollector, explained_variance, gae
+from ovon.train.collect import RolloutCollector, acting_context, explained_variance, gae
 from ovon.train.config import FinetuneConfig, TrainConfig, reward_for
 from ovon.train.run import TrainRun, num_updates
 
@@ -38,7 +38,9 @@ def finetune_lrs(ft: FinetuneConfig, update: int) -> tuple[float, float]:
     s = ft.scale
 
     def ramp(u: float, a: float, b: float) -> float:
-        return 0.0 if b <= a else min(1.0, max(0.0, (u - a) / (b - a)))
+        if b <= a:  # a step at b (the config allows start == end)
+            return 1.0 if u >= b else 0.0
+        return min(1.0, max(0.0, (u - a) / (b - a)))
 
     critic = ft.critic_lr + ramp(update, ft.critic_decay_start * s, ft.critic_decay_end * s) * (
         ft.critic_lr_final - ft.critic_lr)
@@ -113,10 +115,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
         model = dist.wrap(policy, run.info)
         n_envs, T = cfg.num_envs, cfg.rollout_steps
-        # A KV-cached transformer's receptive field is layers x (context - 1) steps: each layer's keys were
-        # computed when their step was acted, from that step's own window.
-        transformer = policy.cfg.core == "transformer" and pc.context_prefix
-        prefix = policy.cfg.layers * (policy.cfg.context - 1) if transformer else 0
+        prefix = acting_context(policy.cfg) if pc.context_prefix else 0
         collector = RolloutCollector(envs, batch, policy, dev, prefix=prefix)
         gate_open = ft.critic_warmup_ev <= 0  # the explained-variance gate of the actor (latched)
         ref_state = None  # the reference LSTM's memory at the next chunk's start
@@ -164,8 +163,8 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 if reference is not None:  # its memory at the first chunk is the policy's: they are equal
                     ref_logits, ref_state = reference_logits(reference, img, goal_seq, prev_seq, start_seq, P, T,
                                                              state0 if ref_state is None else ref_state)
-            if not gate_open and ev >= ft.critic_warmup_ev:
-                gate_open = True
+            if not gate_open:  # every rank opens the gate at the same update (their weights stay equal)
+                gate_open = dist.all_reduce_mean({"ev": ev}, run.info)["ev"] >= ft.critic_warmup_ev
             labels = ro.labels[:, :T].to(dev)
             w_anchor = anchor_weight(ft, update) if finetune else 0.0
             # ---- PPO epochs over env minibatches ------------------------------------------------
