@@ -89,11 +89,11 @@ def test_bc_resume_reproduces_losses(tmp_path: Path) -> None:
         assert torch.equal(x, y)
 
 
-@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-overlap", "ppo"])
+@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-context", "dagger-overlap", "ppo"])
 def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
-    """Envs replay their current episode, the acting memory, the DAgger buffer and every RNG are restored
-    (with `dagger.overlap` also the acting copy and the learner's generator, between checkpoints that
-    leave updates learning in the background)."""
+    """Envs replay their current episode, the acting memory, the DAgger buffer (with its chunks' context
+    views) and every RNG are restored (with `dagger.overlap` also the acting copy and the learner's
+    generator, between checkpoints that leave updates learning in the background)."""
     from ovon.train import train
     from ovon.train.config import DaggerConfig
 
@@ -101,6 +101,9 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
     n, split = 4, 2
     if algo == "dagger-aggregated":
         algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2)}
+    if algo == "dagger-context":
+        algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=2, grad_steps=2, sample_rollouts=2,
+                                                        context_prefix=True)}
     if algo == "dagger-overlap":
         algo, n, split = "dagger", 7, 3
         extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True),

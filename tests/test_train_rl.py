@@ -77,6 +77,30 @@ def test_first_updates_at_lr_zero_have_ratio_one(tmp_path: Path, specs, table: s
         assert r["behaviour_kl"] < 1e-8, r  # a one-window prefix leaves 1e-7..3e-7 here
 
 
+@pytest.mark.parametrize("core", ["transformer", "lstm"])
+def test_dagger_with_its_context_prefix_learns_from_the_policy_that_acted(tmp_path: Path, specs, table: str,
+                                                                         core: str) -> None:
+    """`dagger.context_prefix`: each buffered chunk is re-read after the steps acting saw (transformer) or
+    from the acting (h, c) (LSTM), so at lr 0 the update's log-probs of the newest rollout equal those the
+    actions were taken with (`behaviour_kl` 0) in every update; without it they differ once episodes
+    cross chunk boundaries. The buffer's context is views of older chunks: a one-rollout buffer works too."""
+    from ovon.train import train
+
+    for prefix, buffer in ((True, 3), (True, 1), (False, 3)):
+        cfg = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table, max_updates=6, lr=0.0)
+        cfg = dataclasses.replace(cfg, policy=dataclasses.replace(cfg.policy, core=core, layers=2, context=6),
+                                  dagger=dataclasses.replace(cfg.dagger, context_prefix=prefix, grad_steps=2,
+                                                             buffer_rollouts=buffer, sample_rollouts=min(2, buffer)))
+        out = tmp_path / f"{core}-{prefix}-{buffer}"
+        train(cfg, specs, out)
+        kl = [r["behaviour_kl"] for r in read_metrics(out)]
+        assert len(kl) == 6 and kl[0] < 1e-8  # the first chunk starts every episode: nothing to miss
+        if prefix:
+            assert max(kl) < 1e-8, kl
+        else:
+            assert max(kl[1:]) > 1e-6, kl
+
+
 def test_without_the_context_prefix_the_update_reads_another_policy(tmp_path: Path, specs, table: str) -> None:
     """The check above can fail: re-reading chunks alone gives the transformer a shorter context than it
     acted with once episodes cross chunk boundaries."""

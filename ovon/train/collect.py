@@ -121,25 +121,27 @@ class RolloutCollector:
         P = self.prefix
         tail = self.tail
         if tail is None:
-            tail = {k: _pad(v, P, k == "starts") for k, v in obs.items()}
-        full = {k: _cat_time(tail[k], v) for k, v in obs.items()}
-        acted = {k: _slice_time(full[k], P, P + steps) for k in full}  # the chunk without its bootstrap
-        self.tail = {k: _slice_time(_cat_time(tail[k], acted[k]), -P, None) for k in full}
+            tail = {k: pad_time(v, P, k == "starts") for k, v in obs.items()}
+        full = {k: cat_time(tail[k], v) for k, v in obs.items()}
+        acted = {k: slice_time(full[k], P, P + steps) for k in full}  # the chunk without its bootstrap
+        self.tail = {k: slice_time(cat_time(tail[k], acted[k]), -P, None) for k in full}
         return full
 
 
-def _cat_time(a, b):
+def cat_time(a, b):
+    """Two (N, T, ...) step tensors (or dicts of them: CNN images) joined in time."""
     return {k: torch.cat([a[k], b[k]], 1) for k in a} if isinstance(a, dict) else torch.cat([a, b], 1)
 
 
-def _slice_time(x, lo, hi):
+def slice_time(x, lo, hi):
+    """Steps lo:hi of (N, T, ...) step tensors (or dicts of them); a view."""
     return {k: v[:, lo:hi] for k, v in x.items()} if isinstance(x, dict) else x[:, lo:hi]
 
 
-def _pad(x, n: int, start: bool):
+def pad_time(x, n: int, start: bool):
     """n steps of padding shaped like x's first step (starts: all True)."""
     if isinstance(x, dict):
-        return {k: _pad(v, n, start) for k, v in x.items()}
+        return {k: pad_time(v, n, start) for k, v in x.items()}
     first = x[:, :1]
     pad = torch.ones_like(first) if start else torch.zeros_like(first)
     return pad.expand(-1, n, *first.shape[2:]).clone()

@@ -13,6 +13,7 @@ on a CPU); with `dagger.beta_*` > 0 the expert's own action drives the env with 
 from __future__ import annotations
 
 import copy
+import functools
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -23,7 +24,7 @@ import torch
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
 from ovon.train.batches import cat_images, episode_summary, features, imitation_loss, map_images
-from ovon.train.collect import RolloutCollector
+from ovon.train.collect import RolloutCollector, acting_context, cat_time, pad_time, slice_time
 from ovon.train.config import TrainConfig, reward_for
 from ovon.train.run import TrainRun, num_updates
 
@@ -56,6 +57,9 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
         learn_rng = torch.Generator().manual_seed(cfg.seed * 7919 + 1) if overlap else None
         n_envs, T = cfg.num_envs, cfg.rollout_steps
         collector = RolloutCollector(envs, batch, policy, dev)
+        # context steps before each chunk (transformer) and the acting memory at its start (LSTM)
+        P = acting_context(policy.cfg) if cfg.dagger.context_prefix else 0
+        keep_state = cfg.dagger.context_prefix and policy.cfg.core == "lstm"
         buffer: list[tuple] = []  # aggregated labelled rollouts (cfg.dagger.buffer_rollouts most recent)
         saved = run.restore(optimizer)
         if saved is not None:
@@ -68,20 +72,32 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
         total = num_updates(cfg, run.info.world_size)
         run.open_logger(total)
 
-        def learn(data: list[tuple]) -> dict:
-            """`grad_steps` cross-entropy steps on the expert's labels over (num_envs, T) chunks."""
+        def learn(data: list[tuple], acted: tuple) -> dict:
+            """`grad_steps` cross-entropy steps on the expert's labels over (num_envs, T) chunks. `acted`: the
+            newest rollout's (actions, their log-probs when acting), for `behaviour_kl` (as PPO's: 0 when the
+            first step's update reads the policy that acted; with `dagger.overlap` it also holds the one
+            update by which the actor is staler)."""
             t = time.perf_counter()
             policy.train()
-            losses, accs, grad_norm = [], [], 0.0
-            for _ in range(cfg.dagger.grad_steps):
+            losses, accs, grad_norm, behaviour_kl = [], [], 0.0, 0.0
+            for g in range(cfg.dagger.grad_steps):
                 picks = [len(data) - 1]  # the newest rollout, plus random older ones
                 older = torch.randperm(len(data) - 1, generator=learn_rng)[: cfg.dagger.sample_rollouts - 1]
                 parts = [data[i] for i in picks + older.tolist()]
-                img = map_images(cat_images([p[0] for p in parts]), lambda x: x.to(dev))  # (N, T, ...)
-                obs = policy.make_obs(features(policy, img), torch.cat([p[1] for p in parts]).to(dev))
-                logits, values = model(obs, torch.cat([p[2] for p in parts]).to(dev),
-                                       torch.cat([p[3] for p in parts]).to(dev))
+                seqs = [with_context(p, P) for p in parts]  # (N, P + T, ...): context, then the chunk
+                img = map_images(cat_images([q["images"] for q in seqs]), lambda x: x.to(dev))
+                obs = policy.make_obs(features(policy, img), torch.cat([q["goals"] for q in seqs]).to(dev))
+                state0 = start_states(policy, parts, dev) if keep_state else None
+                logits, values = model(obs, torch.cat([q["prevs"] for q in seqs]).to(dev),
+                                       torch.cat([q["starts"] for q in seqs]).to(dev), state0)
+                logits, values = logits[:, P:], values[:, P:]  # no loss on the context
                 target = torch.cat([p[4] for p in parts]).to(dev)
+                if g == 0:  # rows 0..num_envs: the newest rollout
+                    with torch.no_grad():
+                        actions, acted_logp = (x.to(dev) for x in acted)
+                        logp = policy.distribution(logits[: actions.shape[0]]).log_prob(actions)
+                        log_ratio = logp - acted_logp
+                        behaviour_kl = float((log_ratio.exp() - 1 - log_ratio).mean())
                 valid = target >= 0
                 loss = imitation_loss(logits, target, cfg.stop_loss_weight) + 0.0 * values.sum()  # DDP sees critic
                 optimizer.zero_grad(set_to_none=True)
@@ -91,6 +107,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 losses.append(loss.item())
                 accs.append((logits[valid].argmax(-1) == target[valid]).float().mean().item())
             return {"loss": float(np.mean(losses)), "accuracy": float(np.mean(accs)), "grad_norm": grad_norm,
+                    "behaviour_kl": behaviour_kl,
                     "time/learn_s": time.perf_counter() - t}
 
         last: dict = {}
@@ -117,13 +134,14 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 if beta > 0:
                     use_expert = torch.rand(n_envs, device=dev) < beta
                     action = torch.where(use_expert, b.label.to(dev), action)
-                return action, None
+                return action, actor.distribution(logits).log_prob(action)
 
             # ---- rollout: the student acts, the expert labels -------------------------------------
             with run.acting():
                 ro = collector.collect(actor, T, choose)
             t1 = time.perf_counter()
-            buffer.append((_compact(ro.images), ro.goals, ro.prevs, ro.starts, ro.labels))
+            buffer.append(buffer_entry(ro, buffer[-1] if buffer else None, P, keep_state))
+            acted = (ro.actions, ro.behaviour_logp)
             del buffer[: max(0, len(buffer) - cfg.dagger.buffer_rollouts)]
             finished = ro.finished
             run.step += n_envs * T * run.info.world_size
@@ -140,14 +158,14 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                     pending = None
                 actor.load_state_dict(policy.state_dict())  # the weights after the previous update
                 if checkpoint:  # a checkpoint holds a finished update, so learn this one now
-                    learned = learn(list(buffer))
+                    learned = learn(list(buffer), acted)
                     record["wall_s"] = time.perf_counter() - t_prev
                     t_prev = time.perf_counter()
                     finish(update, learned, record)
                 else:
-                    pending = (update, pool.submit(learn, list(buffer)), record)
+                    pending = (update, pool.submit(learn, list(buffer), acted), record)
             else:
-                learned = learn(buffer)
+                learned = learn(buffer, acted)
                 record["wall_s"] = time.perf_counter() - t0
                 finish(update, learned, record)
             if checkpoint:
@@ -166,6 +184,63 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
             pool.shutdown(wait=True, cancel_futures=True)
         run.close()
     return last
+
+
+def buffer_entry(ro, previous: tuple | None, prefix: int, keep_state: bool) -> tuple:
+    """A rollout as the buffer keeps it: (images, goals, prevs, starts, labels, context, state0). `context`
+    lists the `prefix` steps acted before the chunk as views of the previous entries' tensors (no copy; a
+    dropped entry's storage lives on only while a later entry's context needs it); before the first
+    rollout there is none, and every env's first step there is an episode start. `state0`: the LSTM's
+    acting (h, c) at the chunk's start."""
+    context: list[dict] = []
+    if prefix > 0 and previous is not None:
+        context = last_steps([*_context_of(previous), _chunk_of(previous)], prefix)
+    return (_compact(ro.images), ro.goals, ro.prevs, ro.starts, ro.labels, context,
+            ro.state0 if keep_state else None)
+
+
+def _chunk_of(entry: tuple) -> dict:
+    return {"images": entry[0], "goals": entry[1], "prevs": entry[2], "starts": entry[3]}
+
+
+def _context_of(entry: tuple) -> list[dict]:
+    return entry[5] if len(entry) > 5 else []  # buffers saved before context_prefix existed: none
+
+
+def _steps(part: dict) -> int:
+    return int(part["goals"].shape[1])
+
+
+def last_steps(parts: list[dict], n: int) -> list[dict]:
+    """The last `n` steps (or all there are) of consecutive parts, as views."""
+    out: list[dict] = []
+    need = n
+    for part in reversed(parts):
+        if need <= 0:
+            break
+        k = _steps(part)
+        out.insert(0, part if k <= need else {key: slice_time(v, k - need, None) for key, v in part.items()})
+        need -= min(k, need)
+    return out
+
+
+def with_context(entry: tuple, prefix: int) -> dict:
+    """The entry's chunk after exactly `prefix` context steps (N, prefix + T, ...). A context shorter than
+    `prefix` (the first rollouts of a run) is padded in front with steps marked as episode starts, which
+    nothing attends to: those chunks begin with every env's first step."""
+    parts = [*_context_of(entry), _chunk_of(entry)] if prefix > 0 else [_chunk_of(entry)]
+    seq = functools.reduce(lambda a, b: {k: cat_time(a[k], b[k]) for k in a}, parts)
+    missing = prefix - sum(_steps(q) for q in parts[:-1])
+    if missing > 0:
+        seq = {k: cat_time(pad_time(v, missing, k == "starts"), v) for k, v in seq.items()}
+    return seq
+
+
+def start_states(policy, entries: list[tuple], dev) -> tuple:
+    """The LSTM (h, c) of the entries' chunks at their starts, joined over envs (zeros where none was kept)."""
+    states = [e[6] if len(e) > 6 and e[6] is not None else policy.init_state(e[1].shape[0], "cpu")
+              for e in entries]
+    return tuple(torch.cat([s[j].to(dev) for s in states], 1) for j in range(2))
 
 
 def _compact(images: object) -> object:
