@@ -528,3 +528,21 @@ def test_main_at_tiny_scale_end_to_end(tmp_path: Path) -> None:
     assert sorted(redone.ran) == ["eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
     assert (tmp_path / "tiny" / "train" / "bc.old-1" / "policy.pt").is_file()
     assert (tmp_path / "tiny" / "train" / "bc.old-1" / "experiment_record.json").is_file()
+
+
+def test_within_noise_means_the_deciding_gaps_could_flip_the_verdict() -> None:
+    """A finding that loses by 20 points is not "within noise" because another of its gaps is small; one that
+    holds is, when any of its gaps is smaller than the two stds summed."""
+    from ovon.experiments.definitions import Check
+    from ovon.experiments.findings import judge_check
+
+    table = {"dagrl": (20.0, 1.0), "bc": (19.5, 1.0), "rl": (40.0, 0.5), "dagger": (10.0, 0.5)}
+    best = Check(kind="best", target="dagrl", others=("bc", "rl"))
+    clear_loss = judge_check(best, lambda r, m: table[r])
+    assert clear_loss["verdict"] == "does not hold" and not clear_loss["within_noise"]
+    close_win = judge_check(Check(kind="best", target="dagrl", others=("bc", "dagger")), lambda r, m: table[r])
+    assert close_win["verdict"] == "holds" and close_win["within_noise"]
+    close_loss = judge_check(Check(kind="greater", pairs=(("bc", "dagrl"),)), lambda r, m: table[r])
+    assert close_loss["verdict"] == "does not hold" and close_loss["within_noise"]
+    flat = judge_check(Check(kind="flat", refs=("dagrl", "bc", "dagger"), tolerance=9.0), lambda r, m: table[r])
+    assert flat["verdict"] == "does not hold" and flat["within_noise"]  # spread 10 vs 9, stds 1 + 0.5

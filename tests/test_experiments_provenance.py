@@ -239,3 +239,27 @@ def test_parse_code() -> None:
     }
     assert parse_code("ovon 0.1.0")["commit"] is None and not parse_code("ovon 0.1.0")["dirty"]
     assert parse_code("")["version"] == ""
+
+
+def test_what_reads_a_changed_cell_is_changed_too(tmp_path, tiny_dataset, tiny_scenes, monkeypatch) -> None:
+    """A DAgger whose config changed makes the DAgRL fine-tuned from it, and that one's evaluation, stale
+    (they used to stay "done", and a report showed their numbers as current)."""
+    import ovon.train.config as train_config
+
+    root = tmp_path / "root"
+    plan = _plan(root, tiny_dataset, tiny_scenes)
+    for cid in ("train:dagger", "train:dagrl", "eval:dagrl-od"):
+        _done(plan, cid)
+    quiet = Console(file=io.StringIO())
+    before = run(plan, dry_run=True, console=quiet).statuses
+    assert [before[c].state for c in ("train:dagger", "train:dagrl", "eval:dagrl-od")] == ["done"] * 3
+    cpu_small = train_config.PRESETS["cpu-small"]
+    monkeypatch.setitem(
+        train_config.PRESETS,
+        "cpu-small",
+        lambda: dataclasses.replace(cpu_small(), dagger=dataclasses.replace(cpu_small().dagger, beta_updates=7)),
+    )
+    now = run(_plan(root, tiny_dataset, tiny_scenes), dry_run=True, console=quiet).statuses
+    assert now["train:dagger"].state == "changed" and now["train:dagrl"].state == "changed"
+    assert (now["eval:dagrl-od"].state, now["eval:dagrl-od"].detail) == (
+        "changed", "train:dagrl, which it reads, changed since it ran")

@@ -121,6 +121,25 @@ def test_a_limit_picks_the_first_episodes_and_counts_the_invalid_ones_among_them
     assert "val_seen: 3 of 4 episodes per seed (1 skipped" in (out / "table.md").read_text()
 
 
+def test_reports_show_the_episodes_the_last_command_wanted(tiny_dataset, tiny_scenes, tmp_path, capsys):
+    """A run evaluated on 3 episodes, then asked for 1, keeps all 3 records in episodes.jsonl; its summary,
+    `ovon report` and the experiment report's records cover the 1 (reports once read every record)."""
+    from ovon.evaluate.results import read_records, selected_records, summarize
+
+    out = tmp_path / "run"
+    for n in ("3", "1"):
+        rc, _, errors = run(_evaluate(tiny_dataset, tiny_scenes, out, "--episodes", n), capsys)
+        assert rc == 0, errors
+    assert len(read_records(out)) == 3 and len(selected_records(out)) == 1
+    summary = json.loads((out / "summary.json").read_text())["splits"]["val_seen"]
+    assert summary["episodes"] == 1 and summarize(selected_records(out))["val_seen"]["episodes"] == 1
+    rc, _, errors = run(["report", str(out), "--out", str(tmp_path / "rep")], capsys)
+    assert rc == 0, errors
+    soft, dist = summary["soft_spl"]["mean"], summary["distance_to_goal"]["mean"]
+    dist = f"| random | val_seen | {100 * soft:.1f} | {dist:.2f} |"
+    assert dist in (tmp_path / "rep" / "report.md").read_text()
+
+
 def test_a_clean_split_reports_zero_skipped_and_keeps_the_table(tiny_dataset, tiny_scenes, tmp_path, capsys):
     out = tmp_path / "run"
     rc, _, errors = run(_evaluate(tiny_dataset, tiny_scenes, out, "--episodes", "2"), capsys)

@@ -46,6 +46,7 @@ from ovon.evaluate.results import (
     record_key,
     summarize,
     write_canonical,
+    write_selection,
 )
 from ovon.parallel import init_worker, progress_bar, run_jobs
 from ovon.task.episode import EpisodeSpec
@@ -476,6 +477,7 @@ def finalize(run_dir: str | Path, name: str, wanted: set | None = None, skipped:
     records = write_canonical(run_dir, read_records(run_dir))
     if wanted is not None:
         records = [r for r in records if record_key(r) in wanted]
+    write_selection(run_dir, wanted)
     summary = {"name": name, "splits": summarize(records)}
     for split, entry in summary["splits"].items():
         if skipped and split in skipped:

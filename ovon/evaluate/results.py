@@ -142,6 +142,31 @@ def read_records(run_dir: str | Path, repair: bool = False) -> list[dict]:
     return rf.records
 
 
+SELECTION_FILE = "selection.json"  # the episodes the run's last command wanted (summary.json's records)
+
+
+def write_selection(run_dir: str | Path, wanted: set | None) -> None:
+    """Record which records the run's summary covers: a run extended and then asked for fewer episodes or
+    seeds keeps every record in episodes.jsonl, and a report must show the summary's numbers, not all of
+    them. None (every record): no file."""
+    path = Path(run_dir) / SELECTION_FILE
+    if wanted is None:
+        path.unlink(missing_ok=True)
+        return
+    keys = sorted([split, int(seed), scene, str(eid)] for split, seed, scene, eid in wanted)
+    atomic_write_bytes(path, json.dumps({"episodes": keys}).encode())
+
+
+def selected_records(run_dir: str | Path) -> list[dict]:
+    """The records the run's summary covers (`write_selection`): all of them when the run names none."""
+    records = read_records(run_dir)
+    path = Path(run_dir) / SELECTION_FILE
+    if not path.exists():
+        return records
+    wanted = {tuple(k) for k in json.loads(path.read_text(encoding="utf-8"))["episodes"]}
+    return [r for r in records if record_key(r) in wanted]
+
+
 def write_canonical(run_dir: str | Path, records: list[dict]) -> list[dict]:
     """Rewrite episodes.jsonl with `records` in canonical order (atomically); returns them sorted."""
     ordered = sorted(records, key=canonical_key)

@@ -33,11 +33,19 @@ def rule_text(chk: Check) -> str:
     return f"mean {m} drop over ({drop_a}) < mean {m} drop over ({drop_b})"
 
 
+def _deciding(holds: bool, oks: list[bool], close: list[bool]) -> bool:
+    """Whether the verdict is within noise: when it holds, any of its gaps could flip it; when it does not,
+    only if every failing gap could (a clear loss elsewhere decides it)."""
+    if holds:
+        return any(close)
+    return all(c for ok, c in zip(oks, close) if not ok)
+
+
 def _gaps(pairs: list[tuple[Value, Value]]) -> tuple[bool, bool, list[float]]:
     gaps = [a[0] - b[0] for a, b in pairs]
-    holds = all(g > 0 for g in gaps)
-    noisy = any(abs(a[0] - b[0]) < a[1] + b[1] for a, b in pairs)
-    return holds, noisy, gaps
+    oks = [g > 0 for g in gaps]
+    close = [abs(a[0] - b[0]) < a[1] + b[1] for a, b in pairs]
+    return all(oks), _deciding(all(oks), oks, close), gaps
 
 
 def judge_check(chk: Check, look: Lookup) -> dict:
@@ -60,12 +68,14 @@ def judge_check(chk: Check, look: Lookup) -> dict:
         means = [v[r][0] for r in chk.refs]
         spread = max(means) - min(means)
         holds = spread <= chk.tolerance
-        noisy = abs(spread - chk.tolerance) < max(v[r][1] for r in chk.refs) * 2
+        hi, lo = max(chk.refs, key=lambda r: v[r][0]), min(chk.refs, key=lambda r: v[r][0])
+        noisy = abs(spread - chk.tolerance) < v[hi][1] + v[lo][1]
         numbers = ", ".join(show(r) for r in chk.refs) + f" (spread {spread:.1f})"
     elif chk.kind == "drop":
         drops = [(v[a][0] - v[b][0], v[a][1] + v[b][1]) for a, b in chk.pairs]
-        holds = all(d >= chk.tolerance for d, _ in drops)
-        noisy = any(abs(d - chk.tolerance) < s for d, s in drops)
+        oks = [d >= chk.tolerance for d, _ in drops]
+        holds = all(oks)
+        noisy = _deciding(holds, oks, [abs(d - chk.tolerance) < s for d, s in drops])
         numbers = "; ".join(f"{show(a)} -> {v[b][0]:.1f} (drop {v[a][0] - v[b][0]:.1f})" for a, b in chk.pairs)
     else:  # smaller_drop
         da = [v[a][0] - v[b][0] for a, b in chk.pairs]
@@ -85,5 +95,6 @@ def judge(finding: Finding, look: Lookup) -> dict:
     checks = [{"rule": rule_text(c), **judge_check(c, look)} for c in finding.checks]
     verdicts = {c["verdict"] for c in checks}
     verdict = "not run" if "not run" in verdicts else ("does not hold" if "does not hold" in verdicts else "holds")
-    noisy = verdict != "not run" and any(c["within_noise"] for c in checks)
+    noisy = verdict != "not run" and _deciding(verdict == "holds", [c["verdict"] == "holds" for c in checks],
+                                                [c["within_noise"] for c in checks])
     return {"verdict": verdict, "within_noise": noisy, "checks": checks}

@@ -53,12 +53,13 @@ def _done_seeds(record: dict | None) -> set[int] | None:
 
 
 def eval_records(plan: Plan, cell: Cell) -> list[dict]:
-    """Episode records of a finished evaluation cell, for its splits and finished seeds."""
-    from ovon.evaluate.results import read_records
+    """Episode records of a finished evaluation cell: those its last command wanted (its summary's), for
+    its splits and finished seeds."""
+    from ovon.evaluate.results import selected_records
 
     seeds = _done_seeds(read_record(plan, cell))
     splits = set(cell.eval_cell.splits) if cell.eval_cell else None
-    return [r for r in read_records(cell.folder)
+    return [r for r in selected_records(cell.folder)
             if (seeds is None or int(r["seed"]) in seeds) and (splits is None or r["split"] in splits)]
 
 

@@ -484,6 +484,10 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
         moved = [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
         if moved:
             return Status("changed", f"its input(s) {', '.join(moved)} changed since it ran")
+        # a cell it reads that will be recomputed (its definition, config or inputs changed, or --redo)
+        stale = [d for d in cell.deps if statuses.get(d, Status("done")).state in ("changed", "redo")]
+        if stale:
+            return Status("changed", f"{', '.join(stale)}, which it reads, changed since it ran")
         extended = [d for d in cell.deps if statuses.get(d, Status("done")).state == "partial"
                     and statuses[d].detail.startswith(EXTEND)]
         if extended:

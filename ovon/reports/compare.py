@@ -7,7 +7,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from ovon.dataset.io import VAL_SPLITS
-from ovon.evaluate.results import coverage_lines, paper_table, read_records, summarize
+from ovon.evaluate.results import coverage_lines, paper_table, selected_records, summarize
 from ovon.reports.labels import agent_label, noise_label
 from ovon.task.tracker import FAILURE_LABELS
 
@@ -25,7 +25,7 @@ def load_run(run_dir: str | Path) -> tuple[str, list[dict]]:
             f"{run_dir} is not a run folder (no episodes.jsonl); run `ovon evaluate --out {run_dir}`"
         )
     name = load_meta(run_dir).get("name") or run_dir.name
-    return name, read_records(run_dir)
+    return name, selected_records(run_dir)
 
 
 def load_skipped(run_dir: str | Path) -> list[str]:
