@@ -10,6 +10,7 @@ import json
 import os
 import re
 import shlex
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -263,3 +264,39 @@ def test_what_reads_a_changed_cell_is_changed_too(tmp_path, tiny_dataset, tiny_s
     assert now["train:dagger"].state == "changed" and now["train:dagrl"].state == "changed"
     assert (now["eval:dagrl-od"].state, now["eval:dagrl-od"].detail) == (
         "changed", "train:dagrl, which it reads, changed since it ran")
+
+
+def test_a_cells_command_compares_without_set_order_or_data_workers() -> None:
+    """Reordered `--set` pairs (YAML key order) and a data cell's `--workers` (generation is the same with
+    any number) do not make a finished cell stale; a repeated key's order does (the last one wins)."""
+    from types import SimpleNamespace
+
+    from ovon.experiments.state import same_commands
+
+    def now(text: str):
+        return lambda plan, cell, legacy=False: [text]
+
+    gen = "ovon dataset generate --set b=2 --set a=1 --workers 2 --out $ROOT/x"
+    data, train = SimpleNamespace(kind="data"), SimpleNamespace(kind="train")
+    assert same_commands(["ovon dataset generate --set a=1 --workers 1 --set b=2 --out $ROOT/x"], None, data, now(gen))
+    assert not same_commands(["ovon dataset generate --set a=1 --set b=3 --out $ROOT/x"], None, data, now(gen))
+    assert not same_commands(["ovon train --set a=1 --set a=2"], None, train, now("ovon train --set a=2 --set a=1"))
+    assert same_commands(["ovon train --set b=1 --agent-arg x=1 --set a=2"], None, train,
+                         now("ovon train --set a=2 --set b=1 --agent-arg x=1"))
+    assert not same_commands(["ovon evaluate --workers 1"], None, train, now("ovon evaluate --workers 2"))
+
+
+def test_another_scene_dataset_at_the_same_path_makes_finished_cells_stale(tmp_path, tiny_dataset, tiny_scenes) -> None:
+    """The scenes are an input like the episodes: a file of another size under the scenes root (another
+    release copied over it) makes what read them stale; records from before scenes were recorded stay done."""
+    scenes = tmp_path / "scenes"
+    shutil.copytree(tiny_scenes, scenes, symlinks=False)
+    plan = _plan(tmp_path / "root", tiny_dataset, scenes)
+    _done(plan, "eval:vlfm")
+    _done(plan, "eval:vlfm-noise", inputs={"data": inputs(plan, plan.cells["eval:vlfm-noise"])["data"]})
+    assert cell_status(plan, plan.cells["eval:vlfm"], {}).state == "done"
+    victim = next(p for p in sorted(scenes.rglob("*")) if p.is_file())
+    victim.write_bytes(victim.read_bytes() + b"\0")
+    st = cell_status(plan, plan.cells["eval:vlfm"], {})
+    assert (st.state, st.detail) == ("changed", "its input(s) scenes changed since it ran")
+    assert cell_status(plan, plan.cells["eval:vlfm-noise"], {}).state == "done"

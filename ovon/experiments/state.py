@@ -197,16 +197,42 @@ def _in_form_of(recorded: list[str] | None, plan: Plan, cell: Cell, what) -> lis
     return what(plan, cell, legacy=not new_form and plan.scale.data.source == "paths")
 
 
+PAIRED = ("--set", "--agent-arg")  # options whose pairs may come in any order (when their keys differ)
+
+
+def _normal(words: list[str], kind: str) -> list[str]:
+    """A command's words as compared: `--set` / `--agent-arg` pairs sorted unless a key repeats (then the
+    last one wins: order matters), and a data cell's `--workers` left out (generation gives the same files
+    whatever the number of workers)."""
+    rest, pairs, i = [], [], 0
+    while i < len(words):
+        w = words[i]
+        if w in PAIRED and i + 1 < len(words):
+            pairs.append((w, words[i + 1]))
+            i += 2
+        elif kind == "data" and w == "--workers" and i + 1 < len(words):
+            i += 2
+        else:
+            rest.append(w)
+            i += 1
+    keys = [(o, v.partition("=")[0]) for o, v in pairs]
+    if len(set(keys)) == len(keys):
+        pairs.sort()
+    return rest + [x for p in pairs for x in p]
+
+
 def same_commands(recorded: list[str] | None, plan: Plan, cell: Cell, what) -> bool:
     """Whether recorded command text is the cell's `what(plan, cell)` (full_commands or identity), word by
-    word (quoting aside), also in the form records had before datasets outside the root were tokens."""
+    word (quoting and the order of `--set` pairs aside, see `_normal`), also in the form records had before
+    datasets outside the root were tokens."""
     if recorded is None:
         return False
     try:
-        words = [shlex.split(c) for c in recorded]
+        words = [_normal(shlex.split(c), cell.kind) for c in recorded]
     except ValueError:
         return False
-    return any(words == [shlex.split(c) for c in what(plan, cell, legacy=legacy)] for legacy in (False, True))
+    return any(words == [_normal(shlex.split(c), cell.kind) for c in what(plan, cell, legacy=legacy)]
+               for legacy in (False, True))
 
 
 def first_difference(old: list[str], new: list[str]) -> str:
@@ -363,11 +389,24 @@ def data_fingerprint(plan: Plan) -> str | None:
     return h.hexdigest()
 
 
+def scenes_fingerprint(plan: Plan) -> str | None:
+    """Identity of the scenes: names and sizes of the files under the scenes root (another release of a
+    scene dataset at the same path differs), without reading them."""
+    root = plan.scenes_dir
+    if not root.is_dir():
+        return None
+    h = hashlib.sha256()
+    for p in sorted(p for p in root.rglob("*") if p.is_file()):
+        h.update(f"{p.relative_to(root).as_posix()}\0{p.stat().st_size}\n".encode())
+    return h.hexdigest()
+
+
 def inputs(plan: Plan, cell: Cell) -> dict[str, Any]:
-    """Identities of what the cell reads (absent values are None)."""
+    """Identities of what the cell reads (absent values are None). Records written before an input was
+    recorded compare only what they hold."""
     if cell.kind == "data":
         return {}
-    out: dict[str, Any] = {"data": data_fingerprint(plan)}
+    out: dict[str, Any] = {"data": data_fingerprint(plan), "scenes": scenes_fingerprint(plan)}
     for dep in cell.deps:
         if dep.startswith("train:"):
             out[dep] = file_hash(plan.cells[dep].folder / "policy.pt")
