@@ -157,6 +157,12 @@ def test_redo_takes_what_depends_on_a_cell_and_never_a_users_dataset(tmp_path: P
     result = run(plan, redo_cells=["train:bc"], dry_run=True, console=quiet())
     assert sorted(c for c, s in result.statuses.items() if s.state == "redo") == [
         "eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
+    # what the cascade would move aside must also run: --only leaving it out is refused, before any work
+    with pytest.raises(DefinitionError, match=r"--redo train:bc also recomputes train:bcrl, eval:bc, eval:bcrl .*fix: "
+                                              r"add them to --only"):
+        run(plan, only=["train:bc"], redo_cells=["train:bc"], dry_run=True, console=quiet())
+    both = run(plan, only=["eval:bc", "eval:bcrl"], redo_cells=["train:bc"], dry_run=True, console=quiet())
+    assert both.statuses["eval:bcrl"].state == "redo"
     paper = resolve([load_experiment("main")], "paper", tmp_path)
     with pytest.raises(DefinitionError, match="never moves"):
         run(paper, redo_cells=["data"], dry_run=True, console=quiet())

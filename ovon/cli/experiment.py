@@ -96,8 +96,8 @@ def cmd_run(args) -> int:
     try:
         result = run(plan, only=_csv(args.only) or None, shard=shard, redo_cells=redo,
                      dry_run=args.dry_run, wait=not args.no_wait, write_report=not args.no_report)
-    except KeyboardInterrupt:
-        print("interrupted: re-run the same command to resume")
+    except KeyboardInterrupt:  # with --redo the old results are already aside: --redo again would redo anew
+        print("interrupted: re-run the same command " + ("without --redo " if redo else "") + "to resume")
         return 130
     return 0 if result.ok else 1
 

@@ -300,6 +300,11 @@ def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None
     if "data:data" in cascade and not plan.cells["data:data"].commands:
         raise DefinitionError(f"--redo data: scale {plan.scale.name!r} reads your own dataset ({plan.episodes_dir}), "
                               "which the runner never moves; fix: --redo the training or evaluation cells instead")
+    outside = [c for c in cascade if c not in ids]
+    if outside:  # moved aside but never recomputed: what reads them would then be missing
+        raise DefinitionError(f"--redo {','.join(redo_cells)} also recomputes {', '.join(outside)} (they read what "
+                              "is redone), which --only/--shard leaves out; fix: add them to --only, or drop --only "
+                              "/ --shard")
     for cid in cascade:
         statuses[cid] = Status("redo", "its old folder will be kept as <folder>.old-N")
     unknown = [c for c in config_unknown(plan, ids) if c not in cascade]
