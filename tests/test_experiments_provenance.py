@@ -300,3 +300,30 @@ def test_another_scene_dataset_at_the_same_path_makes_finished_cells_stale(tmp_p
     st = cell_status(plan, plan.cells["eval:vlfm"], {})
     assert (st.state, st.detail) == ("changed", "its input(s) scenes changed since it ran")
     assert cell_status(plan, plan.cells["eval:vlfm-noise"], {}).state == "done"
+
+
+def test_a_cell_whose_code_changed_while_it_ran_ran_with_both(tmp_path, monkeypatch) -> None:
+    """The code is read when an attempt starts and when it ends: a tree edited meanwhile, or a new untracked
+    module in the package, is not "a clean tree"."""
+    import ovon
+    from ovon.experiments.provenance import attempt_codes, code_version
+
+    record = {"code": "ovon 0.1.0 (abc1234)", "code_end": "ovon 0.1.0 (abc1234+dirty)",
+              "history": [{"code": "ovon 0.1.0 (abc1234)", "code_end": "ovon 0.1.0 (abc1234+dirty)"}]}
+    assert attempt_codes(record) == ["ovon 0.1.0 (abc1234)", "ovon 0.1.0 (abc1234+dirty)"]
+    repo = tmp_path / "repo"
+    (repo / "pkg").mkdir(parents=True)
+    (repo / "pkg" / "__init__.py").write_text("")
+
+    def git(*a: str) -> None:
+        subprocess.run(["git", "-C", str(repo), *a], check=True, capture_output=True,
+                       env={**os.environ, "GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t",
+                            "GIT_COMMITTER_EMAIL": "t@t"})
+
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "x")
+    monkeypatch.setattr(ovon, "__file__", str(repo / "pkg" / "__init__.py"))
+    assert not code_version().endswith("+dirty)")
+    (repo / "pkg" / "new_agent.py").write_text("X = 1\n")
+    assert code_version().endswith("+dirty)")

@@ -38,6 +38,13 @@ def code_version() -> str:
             text=True,
             timeout=10,
         ).stdout.strip()
+        # a new, untracked module in the package runs too (git's ignore rules keep caches out)
+        dirty = dirty or subprocess.run(
+            ["git", "-C", where, "status", "--porcelain", "--untracked-files=all", "--", "."],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return text
     return f"{text} ({rev}{'+dirty' if dirty else ''})" if rev else text
@@ -58,9 +65,8 @@ def _key(code: dict) -> str:
 
 def attempt_codes(record: dict) -> list[str]:
     """The distinct code texts the cell's attempts ran with, oldest first (older records: the last only)."""
-    codes = [h.get("code") for h in record.get("history", []) if h.get("code")]
-    if record.get("code"):
-        codes.append(record["code"])
+    codes = [c for h in record.get("history", []) for c in (h.get("code"), h.get("code_end")) if c]
+    codes += [c for c in (record.get("code"), record.get("code_end")) if c]
     return list(dict.fromkeys(codes))
 
 

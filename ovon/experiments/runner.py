@@ -214,8 +214,13 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
 def _finish_record(plan: Plan, cell: Cell, rec: dict, t0: float) -> None:
     wall = time.perf_counter() - t0
     rec["wall_s"] = round(float(rec.get("wall_s", 0.0)) + wall, 1)
+    end = code_version()  # the tree may have changed while the cell ran: then it ran with both
+    if end != rec.get("code"):
+        rec["code_end"] = end
+    else:
+        rec.pop("code_end", None)
     rec.setdefault("history", []).append({"started": rec["started"], "wall_s": round(wall, 1), "rc": rec.get("rc"),
-                                          "code": rec.get("code")})
+                                          "code": rec.get("code"), **({"code_end": end} if "code_end" in rec else {})})
     write_record(plan, cell, rec)
 
 
