@@ -514,6 +514,25 @@ def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:
     assert lock_holder(plan, cell) is None
 
 
+def test_redo_moves_cells_aside_under_their_locks(tmp_path: Path) -> None:
+    """--redo takes each cell's lock before moving anything (another runner could start a half-moved cell),
+    and moves nothing when one of them is held."""
+    from ovon.experiments.runner import redo
+    from ovon.experiments.state import cell_lock, lock_holder
+
+    plan = resolve([load_experiment("main")], "cpu", tmp_path)
+    for cid in ("train:bc", "eval:bc"):
+        plan.cells[cid].folder.mkdir(parents=True)
+    held = cell_lock(plan, plan.cells["eval:bc"])
+    with pytest.raises(DefinitionError, match=r"--redo: cell eval:bc is in use by pid \d+"):
+        redo(plan, ["train:bc", "eval:bc"], quiet())
+    assert plan.cells["train:bc"].folder.is_dir() and lock_holder(plan, plan.cells["train:bc"]) is None
+    held.release()
+    redo(plan, ["train:bc", "eval:bc"], quiet())
+    assert not plan.cells["train:bc"].folder.exists() and (tmp_path / "cpu" / "train" / "bc.old-1").is_dir()
+    assert lock_holder(plan, plan.cells["eval:bc"]) is None
+
+
 @pytest.mark.slow
 def test_main_at_tiny_scale_end_to_end(tmp_path: Path) -> None:
     """The whole `main` experiment at tiny scale (the modular rows stay "not run" until their agents exist),

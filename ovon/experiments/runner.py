@@ -282,14 +282,23 @@ def _preflight(plan: Plan, ids: list[str], statuses: dict[str, Status], redone: 
 
 
 def redo(plan: Plan, cascade: list[str], console: Console) -> None:
-    """Move the old results of the cells in `cascade` aside (see `dependents`)."""
-    busy = [f"{c} ({h})" for c in cascade if (h := lock_holder(plan, plan.cells[c]))]
-    if busy:
-        raise DefinitionError(f"--redo: cell(s) in use by another process: {'; '.join(busy)}; fix: wait for them")
-    for cid in cascade:
-        dest = move_aside(plan, plan.cells[cid])
-        if dest is not None:
-            say(console, f"{cid}: old results kept in {dest}")
+    """Move the old results of the cells in `cascade` aside (see `dependents`), holding every one's lock
+    meanwhile so that no other runner starts one of them half-moved."""
+    locks = {}
+    try:
+        for cid in cascade:
+            lock = cell_lock(plan, plan.cells[cid])
+            if lock is None:
+                who = lock_holder(plan, plan.cells[cid]) or "another process"
+                raise DefinitionError(f"--redo: cell {cid} is in use by {who}; fix: wait for it, then re-run")
+            locks[cid] = lock
+        for cid in cascade:
+            dest = move_aside(plan, plan.cells[cid])
+            if dest is not None:
+                say(console, f"{cid}: old results kept in {dest}")
+    finally:
+        for lock in locks.values():
+            lock.release()
 
 
 def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None = None,
