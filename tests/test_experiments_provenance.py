@@ -327,3 +327,21 @@ def test_a_cell_whose_code_changed_while_it_ran_ran_with_both(tmp_path, monkeypa
     assert not code_version().endswith("+dirty)")
     (repo / "pkg" / "new_agent.py").write_text("X = 1\n")
     assert code_version().endswith("+dirty)")
+
+
+def test_an_interrupted_cell_whose_input_changed_is_changed_not_failed(tmp_path, tiny_dataset, tiny_scenes) -> None:
+    """An evaluation interrupted before its policy was retrained cannot resume (the run folder refuses the new
+    checkpoint): it says "changed" (the fix: --redo), not "failed" on every run."""
+    plan = _plan(tmp_path / "root", tiny_dataset, tiny_scenes)
+    _done(plan, "train:dagrl")
+    cell = plan.cells["eval:dagrl-od"]
+    cell.folder.mkdir(parents=True)
+    write_record(plan, cell, {"kind": "eval", "name": cell.name, "state": "failed", "rc": "interrupted",
+                              "identity": identity(plan, cell), "config": resolved_config(plan, cell),
+                              "inputs": inputs(plan, cell)})
+    statuses = {"data:data": cell_status(plan, plan.cells["data:data"], {}),
+                "train:dagrl": cell_status(plan, plan.cells["train:dagrl"], {})}
+    assert cell_status(plan, cell, statuses).state == "failed"
+    (plan.cells["train:dagrl"].folder / "policy.pt").write_text('{"retrained": 1}')
+    st = cell_status(plan, cell, statuses)
+    assert (st.state, st.detail) == ("changed", "its input(s) train:dagrl changed since its last attempt")

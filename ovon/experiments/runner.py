@@ -167,7 +167,8 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
                                               "code": rec.get("code")})
     rec.update({"kind": cell.kind, "name": cell.name, "identity": identity(plan, cell), "state": "running",
                 "attempts": int(rec.get("attempts", 0)) + 1, "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-                "code": code_version(), "config": resolved_config(plan, cell)})
+                "code": code_version(), "config": resolved_config(plan, cell),
+                "inputs": inputs(plan, cell)})  # an unfinished attempt's inputs too: see `cell_status`
     write_record(plan, cell, rec)
     log = log_path(plan, cell)
     t0 = time.perf_counter()

@@ -539,6 +539,11 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
     waiting = [d for d in cell.deps if statuses.get(d, Status("done")).state != "done"]
     if waiting:
         return Status("waiting", ", ".join(waiting))
+    if rec is not None and rec.get("inputs"):  # an unfinished attempt read other inputs: it cannot resume
+        now = inputs(plan, cell)
+        moved = [k for k, v in rec["inputs"].items() if now.get(k) != v]
+        if moved:
+            return Status("changed", f"its input(s) {', '.join(moved)} changed since its last attempt")
     left = partial_outputs(plan, cell)
     if rec is not None and rec.get("state") == "failed":
         more = f"; {left}" if left else ""
