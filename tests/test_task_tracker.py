@@ -115,6 +115,18 @@ def test_goal_below_one_percent_is_not_seen():
     assert labelled([0.5, 1.0], stop=False, frames=[barely, barely]) == "timeout_missed_goal"
 
 
+def test_seen_means_one_goal_instance_covers_one_percent():
+    """Two goal instances at 0.6% of the frame each are not "seen" (the spec: *a* goal instance covering
+    1%), as `goal_in_view` and the distractors already count per instance; one at 1.2% is."""
+    t = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL, GOAL + 1}), TaskConfig(max_steps=2), [])
+    t.reset(np.zeros(3), frame())
+    walk(t, [0.5, 1.0], False, [frame({GOAL: 0.006, GOAL + 1: 0.006})] * 2)
+    assert t.metrics().failure == "timeout_missed_goal" and not t.goal_seen
+    t.reset(np.zeros(3), frame())
+    walk(t, [0.5, 1.0], False, [frame({GOAL: 0.012}), frame()])
+    assert t.metrics().failure == "timeout_ignored_goal"
+
+
 def test_timeout_left_goal():
     f = frame({GOAL: 0.1})
     assert labelled([2.0, 3.0, 2.0], stop=False, frames=[f, f, f]) == "timeout_left_goal"
@@ -264,3 +276,36 @@ def test_best_progress_pays_only_for_a_new_closest_distance():
     delta.update(np.array([0.5, 0.0, 0.0]), stop=False, collided=False)
     delta.update(np.array([0.25, 0.0, 0.0]), stop=False, collided=False)
     assert delta.reward() == pytest.approx(-0.25)
+
+
+def test_goal_viewpoints_on_another_floor_are_not_goals_on_the_start_floor():
+    """A viewpoint upstairs stands over a navigable cell downstairs; it must not become a goal there (the
+    episode's distance and success region are the start floor's, as the dataset validator measures d0)."""
+    import numpy as np
+
+    from ovon.config.sim import SimConfig
+    from ovon.config.task import TaskConfig
+    from ovon.sim.geodesic import distance_field
+    from ovon.sim.world import build_world
+    from ovon.task.episode import EpisodeSpec, GoalViewpoint
+    from ovon.task.setup import prepare_episode
+
+    world = build_world("procedural:1", SimConfig())
+    down, up = world.nav.floors
+    rng = np.random.default_rng(0)
+    start = down.random_point(rng)
+    far = next(p for p in (down.random_point(rng) for _ in range(500))
+               if 4.0 < distance_field(down, p[None]).distance(start) < 1e9)
+    above = start + np.array([0.3, up.height - down.height, 0.0])  # upstairs, over the start's neighbourhood
+    assert world.nav.floor_index(above) == up.floor and down.is_navigable(above)
+    cat = world.scene.objects[0].category
+    spec = EpisodeSpec("two-floors", world.scene.scene_id, cat, start_position=start, start_yaw=0.0,
+                       viewpoints=[GoalViewpoint(far, 0.0), GoalViewpoint(above, 0.0)])
+    setup = prepare_episode(world, spec, np.random.default_rng(0), TaskConfig())
+    expect = distance_field(down, far[None]).distance(start)
+    assert abs(setup.goal_field.distance(start) - expect) < 1e-6 and expect > 4.0
+    assert [tuple(v.position) for v in setup.viewpoints] == [tuple(far)]
+    only_up = EpisodeSpec("upstairs", world.scene.scene_id, cat, start_position=start, start_yaw=0.0,
+                          viewpoints=[GoalViewpoint(above, 0.0)])
+    with pytest.raises(ValueError, match="no goal viewpoint on the start's floor 0"):
+        prepare_episode(world, only_up, np.random.default_rng(0), TaskConfig())

@@ -192,6 +192,7 @@ class RecordWriter:
 
 
 def _mean_std(values: list[float]) -> tuple[float, float]:
+    """Mean and population std (ddof 0, numpy's default) of per-seed values."""
     if not values:
         return float("nan"), float("nan")
     m = math.fsum(values) / len(values)

@@ -66,7 +66,15 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
             if all(g is not h for h in grids):
                 grids.append(g)
     if spec.viewpoints:
-        grid, viewpoints = grids[0], spec.viewpoints
+        grid = grids[0]
+        # The start floor's goals only (navigation is per floor, as the dataset validator measures d0): a
+        # viewpoint upstairs over a navigable cell downstairs would otherwise be a goal there.
+        viewpoints = [v for v in spec.viewpoints if world.nav.floor_index(v.position) == grid.floor]
+        if not viewpoints:
+            raise ValueError(f"episode {spec.episode_id!r} in scene {spec.scene!r}: no goal viewpoint on the start's "
+                             f"floor {grid.floor} ({len(spec.viewpoints)} on other floors); expected the goal on the "
+                             "start's floor (ovon navigates one floor at a time); fix: `ovon dataset validate` "
+                             "lists such episodes (other_floor): leave them out")
         points = np.stack([v.position for v in viewpoints])
     else:
         grid, points, viewpoints = _adhoc_viewpoints(world, grids, objs, spec.goal_category)

@@ -117,7 +117,7 @@ class EpisodeTracker:
         if len(self._goal_id_array):
             g = self._goal_id_array[self._goal_id_array < len(counts)]
             goal_pixels = counts[g].sum()
-            if goal_pixels >= need:
+            if (counts[g] >= need).any():  # one goal instance covers the threshold (not several together)
                 self.goal_seen = True
             frac = float(goal_pixels) / max(1, flat.size)
             self.goal_view_gain = max(0.0, frac - self.goal_view_max)
