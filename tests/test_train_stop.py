@@ -26,6 +26,8 @@ def saved_handlers():
 
 
 def test_first_signal_requests_a_stop_second_ctrl_c_stops_now(saved_handlers, capsys):
+    # Python's own Ctrl-C handler to start from (a shell's background job, e.g. under nohup, starts ignoring it)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     stop = StopRequest()
     stop.arm()
     _deliver(signal.SIGTERM)
