@@ -309,3 +309,10 @@ def test_goal_viewpoints_on_another_floor_are_not_goals_on_the_start_floor():
                           viewpoints=[GoalViewpoint(above, 0.0)])
     with pytest.raises(ValueError, match="no goal viewpoint on the start's floor 0"):
         prepare_episode(world, only_up, np.random.default_rng(0), TaskConfig())
+    # a goal on the start's floor that no path reaches is refused at reset, not after a whole episode
+    rows, cols = np.nonzero(down.navigable & (down.islands != down.island_of(start)))  # another island
+    island = np.asarray(down.cell_to_world(int(rows[0]), int(cols[0])))
+    cut_off = EpisodeSpec("island", world.scene.scene_id, cat, start_position=start, start_yaw=0.0,
+                          viewpoints=[GoalViewpoint(island, 0.0)])
+    with pytest.raises(ValueError, match="no goal viewpoint is reachable from the start"):
+        prepare_episode(world, cut_off, np.random.default_rng(0), TaskConfig())

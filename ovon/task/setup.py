@@ -81,6 +81,10 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
     field = distance_field(grid, points)
     if start_pos is None:
         start_pos = _random_reachable_start(grid, field, rng, task.success_distance)
+    elif not math.isfinite(field.distance(start_pos)):  # else the episode would run to its step limit first
+        raise ValueError(f"episode {spec.episode_id!r} in scene {spec.scene!r}: no goal viewpoint is reachable from "
+                         f"the start {np.round(start_pos, 3).tolist()} on floor {grid.floor}; fix: `ovon dataset "
+                         "validate` lists such episodes (unreachable): leave them out")
     yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
     goal_ids = frozenset(o.id for o in objs)
     on_floor = [o for o in objs if world.nav.grid_for(o.aabb_min) is grid] or objs
