@@ -401,12 +401,17 @@ def scenes_fingerprint(plan: Plan) -> str | None:
     return h.hexdigest()
 
 
-def inputs(plan: Plan, cell: Cell) -> dict[str, Any]:
-    """Identities of what the cell reads (absent values are None). Records written before an input was
-    recorded compare only what they hold."""
+def dataset_fingerprints(plan: Plan) -> dict[str, str | None]:
+    """The episodes' and the scenes' identities, which every non-data cell reads."""
+    return {"data": data_fingerprint(plan), "scenes": scenes_fingerprint(plan)}
+
+
+def inputs(plan: Plan, cell: Cell, dataset: dict | None = None) -> dict[str, Any]:
+    """Identities of what the cell reads (absent values are None); `dataset`: `dataset_fingerprints(plan)`
+    when the caller has it (a status pass lists the files once, not once per cell)."""
     if cell.kind == "data":
         return {}
-    out: dict[str, Any] = {"data": data_fingerprint(plan), "scenes": scenes_fingerprint(plan)}
+    out: dict[str, Any] = dict(dataset if dataset is not None else dataset_fingerprints(plan))
     for dep in cell.deps:
         if dep.startswith("train:"):
             out[dep] = file_hash(plan.cells[dep].folder / "policy.pt")
@@ -496,8 +501,17 @@ def lock_holder(plan: Plan, cell: Cell) -> str | None:
 
 
 # ----- status ----------------------------------------------------------------------------------------
-def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock: bool = True) -> Status:
-    """The cell's status given the statuses of the cells before it (`statuses`, by id)."""
+def changed_inputs(plan: Plan, cell: Cell, rec: dict, dataset: dict | None = None) -> list[str]:
+    """The inputs the record holds that differ now (records written before an input was recorded compare
+    only what they hold)."""
+    now = inputs(plan, cell, dataset)
+    return [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
+
+
+def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock: bool = True,
+                dataset: dict | None = None) -> Status:
+    """The cell's status given the statuses of the cells before it (`statuses`, by id); `dataset` as in
+    `inputs`."""
     if cell.unavailable:
         return Status("unavailable", cell.unavailable)
     if cell.kind == "data" and not cell.commands:  # the user's own dataset (paper scale)
@@ -519,8 +533,7 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
     if why:
         return Status("changed", f"its resolved config changed since it ran: {why}")
     if rec is not None and rec.get("state") == "done" and finished_outputs(plan, cell):
-        now = inputs(plan, cell)
-        moved = [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
+        moved = changed_inputs(plan, cell, rec, dataset)
         if moved:
             return Status("changed", f"its input(s) {', '.join(moved)} changed since it ran")
         # a cell it reads that will be recomputed (its definition, config or inputs changed, or --redo)
@@ -540,8 +553,7 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
     if waiting:
         return Status("waiting", ", ".join(waiting))
     if rec is not None and rec.get("inputs"):  # an unfinished attempt read other inputs: it cannot resume
-        now = inputs(plan, cell)
-        moved = [k for k, v in rec["inputs"].items() if now.get(k) != v]
+        moved = changed_inputs(plan, cell, rec, dataset)
         if moved:
             return Status("changed", f"its input(s) {', '.join(moved)} changed since its last attempt")
     left = partial_outputs(plan, cell)
@@ -556,6 +568,7 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
 def plan_status(plan: Plan, ids: list[str] | None = None, check_lock: bool = True) -> dict[str, Status]:
     """Status of every cell (or of `ids` and what they depend on), in plan order."""
     out: dict[str, Status] = {}
+    dataset = dataset_fingerprints(plan)
     for cid, cell in plan.cells.items():
-        out[cid] = cell_status(plan, cell, out, check_lock)
+        out[cid] = cell_status(plan, cell, out, check_lock, dataset)
     return out if ids is None else {k: v for k, v in out.items() if k in ids}
