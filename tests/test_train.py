@@ -134,6 +134,74 @@ def test_atomic_checkpoint_leaves_no_temp(tmp_path: Path) -> None:
     assert [p.name for p in tmp_path.iterdir()] == ["checkpoint.pt"]
 
 
+
+def test_checkpoint_rng_states_restore_from_any_device(tmp_path: Path) -> None:
+    """A checkpoint loaded with `map_location=cuda` carries its RNG byte tensors to the GPU; torch takes
+    generator states only on the CPU (every resume on a GPU failed so). Emulated here with a stand-in
+    whose `.cpu()` is the only way back to a CPU tensor."""
+    from ovon.train.checkpoint import rng_state, set_rng_state
+
+    class OnDevice:
+        def __init__(self, t: torch.Tensor) -> None:
+            self.t = t
+
+        def cpu(self) -> torch.Tensor:
+            return self.t
+
+    state = rng_state()
+    x = torch.rand(3)
+    set_rng_state({**state, "torch": OnDevice(state["torch"])})
+    assert torch.equal(torch.rand(3), x)
+
+
+def test_to_device_moves_every_acting_state_kind() -> None:
+    """Checkpoints load on the CPU; the acting memory (KV cache dataclass, LSTM (h, c), dicts) goes back to
+    the policy's device whole ("meta" stands in for a GPU here), other fields unchanged."""
+    from collections import namedtuple
+
+    from ovon.models.transformer import KVState
+    from ovon.train.checkpoint import to_device
+
+    kv = KVState(k=torch.zeros(1, 2, 1, 3, 4), v=torch.zeros(1, 2, 1, 3, 4), valid=torch.zeros(2, 3, dtype=torch.bool),
+                 pos=torch.arange(2), slot=2)
+    Pair = namedtuple("Pair", "h c")
+    moved = to_device({"kv": kv, "lstm": (torch.ones(1), torch.ones(1)), "nt": Pair(torch.ones(1), 3), "n": [None]},
+                      "meta")
+    assert isinstance(moved["kv"], KVState) and moved["kv"].slot == 2
+    assert all(t.is_meta for t in (moved["kv"].k, moved["kv"].v, moved["kv"].valid, moved["kv"].pos))
+    assert isinstance(moved["lstm"], tuple) and all(t.is_meta for t in moved["lstm"])
+    assert isinstance(moved["nt"], Pair) and moved["nt"].h.is_meta and moved["nt"].c == 3
+    assert moved["n"] == [None] and not kv.k.is_meta  # the original is untouched
+
+def test_a_rank_without_its_gpu_is_refused_in_one_line(monkeypatch) -> None:
+    from ovon.config.base import ConfigError
+    from ovon.train.distributed import resolve_device
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    assert resolve_device("auto", 0) == torch.device("cuda:0")
+    assert resolve_device("cuda", 0) == torch.device("cuda:0")
+    assert resolve_device("cpu", 3) == torch.device("cpu")
+    for pref, rank in (("auto", 1), ("cuda", 1), ("cuda:2", 0)):
+        with pytest.raises(ConfigError, match=r"CUDA sees 1 GPU.*--nproc_per_node 1.*device=cpu"):
+            resolve_device(pref, rank)
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert resolve_device("auto", 1) == torch.device("cpu")
+    with pytest.raises(ConfigError, match=r"no GPU.*fix: --set device=auto"):
+        resolve_device("cuda", 0)
+
+
+def test_cli_train_on_a_missing_gpu_is_refused(tmp_path: Path, table_path: str, capsys) -> None:
+    from tests.cli_errors import one_line, run
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    rc, _, err = run(["train", "--algo", "dagger", "--preset", "tiny", "--expert", "shortest-path", "--procedural",
+                      "0", "--episodes", "3", "--set", f"text_cache={table_path}", "--set", "device=cuda",
+                      "--out", str(tmp_path / "run")], capsys)
+    one_line(rc, err, "device = cuda", "no GPU")
+    assert not (tmp_path / "run").exists()
+
 # ----- distributed ------------------------------------------------------------------------------------
 def test_torchrun_two_ranks_stay_in_sync(tmp_path: Path) -> None:
     shards = write_synthetic_shards(tmp_path / "shards", episodes=8)
@@ -141,7 +209,8 @@ def test_torchrun_two_ranks_stay_in_sync(tmp_path: Path) -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
            "-m", "ovon.cli.main", "train", "--algo", "bc", "--preset", "tiny", "--out", str(out),
-           "--set", f"bc.shards={shards}", "--set", "max_updates=3", "--set", "bc.batch_chunks=2"]
+           "--set", f"bc.shards={shards}", "--set", "max_updates=3", "--set", "bc.batch_chunks=2",
+           "--set", "device=cpu"]  # gloo on any machine (a one-GPU machine refuses two ranks with device=auto)
     r = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
     if r.returncode != 0 and any(s in r.stderr for s in ("EADDRINUSE", "address already in use", "bind")):
         pytest.skip(f"cannot bind a rendezvous port: {r.stderr[-300:]}")

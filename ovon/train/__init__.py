@@ -87,6 +87,9 @@ def train(cfg: TrainConfig, specs: Sequence[EpisodeSpec] | EpisodeSource | None,
     from ovon.config.base import ConfigError
 
     cfg = check_config(cfg)
+    from ovon.train.distributed import check_device
+
+    check_device(cfg.device)  # this rank's GPU exists (else one line, before the folder is made)
     check_source(specs)
     check_out_dir(out_dir)
     if not isinstance(resume, bool):

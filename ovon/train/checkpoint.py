@@ -8,6 +8,7 @@ The policy alone is also exported as `policy.pt` (`ActorCritic.save` format) for
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import random
 from pathlib import Path
@@ -29,11 +30,33 @@ def rng_state() -> dict[str, Any]:
 
 
 def set_rng_state(state: dict[str, Any]) -> None:
+    """Why `.cpu()`: a checkpoint loaded with `map_location=cuda` moves the RNG byte tensors to the GPU too,
+    and torch takes generator states only as CPU byte tensors."""
     random.setstate(state["python"])
     np.random.set_state(state["numpy"])
-    torch.set_rng_state(state["torch"])
+    torch.set_rng_state(state["torch"].cpu())
     if "cuda" in state and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
+        torch.cuda.set_rng_state_all([s.cpu() for s in state["cuda"]])
+
+
+def to_device(obj: Any, device: str | torch.device) -> Any:
+    """`obj` with every tensor inside (tuples, named tuples, lists, dicts, dataclasses) moved to `device`.
+
+    Why: checkpoints load onto the CPU, where most of a run's saved state (DAgger's buffer, the acting
+    tail, RNG states) lives during training; only the acting memory goes back to the policy's device."""
+    if isinstance(obj, torch.Tensor):
+        return obj.to(device)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return dataclasses.replace(obj, **{f.name: to_device(getattr(obj, f.name), device)
+                                           for f in dataclasses.fields(obj) if f.init})
+    if isinstance(obj, tuple):
+        items = [to_device(x, device) for x in obj]
+        return type(obj)(*items) if hasattr(obj, "_fields") else tuple(items)
+    if isinstance(obj, list):
+        return [to_device(x, device) for x in obj]
+    if isinstance(obj, dict):
+        return {k: to_device(v, device) for k, v in obj.items()}
+    return obj
 
 
 def seed_everything(seed: int) -> None:

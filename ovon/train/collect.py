@@ -15,6 +15,7 @@ from typing import Any
 import torch
 
 from ovon.train.batches import Images, features, map_images, stack_images
+from ovon.train.checkpoint import to_device
 from ovon.train.envs import Batch
 
 # choose(logits (N, A), batch) -> (actions (N,), log-probabilities of those actions (N,) or None)
@@ -69,7 +70,7 @@ class RolloutCollector:
                 "tail": self.tail}
 
     def restore(self, saved: dict) -> None:
-        self.act_state = saved["act_state"]
+        self.act_state = to_device(saved["act_state"], self.device)
         self.prev_action = saved["prev_action"].to(self.device)
         self.tail = saved.get("tail")
         self.batch = self.envs.set_state(saved["env"])

@@ -16,6 +16,8 @@ import torch
 import torch.distributed as dist
 from torch import nn
 
+from ovon.config.base import ConfigError
+
 T = TypeVar("T")
 
 
@@ -40,13 +42,37 @@ def launched_by_torchrun() -> bool:
 
 
 def resolve_device(pref: str, local_rank: int = 0) -> torch.device:
-    """`auto` = this rank's GPU when CUDA is available, else CPU."""
+    """`auto` = this rank's GPU when CUDA is available, else CPU. A rank whose GPU does not exist is refused
+    here, in one line, instead of failing inside CUDA at its first tensor (torchrun started more processes
+    per node than the node has GPUs; NCCL also refuses two ranks on one GPU)."""
     if pref == "auto":
-        return torch.device(f"cuda:{local_rank}") if torch.cuda.is_available() else torch.device("cpu")
-    dev = torch.device(pref)
-    if dev.type == "cuda" and dev.index is None:
+        if not torch.cuda.is_available():
+            return torch.device("cpu")
         dev = torch.device(f"cuda:{local_rank}")
+    else:
+        dev = torch.device(pref)
+        if dev.type == "cuda" and dev.index is None:
+            dev = torch.device(f"cuda:{local_rank}")
+    if dev.type == "cuda":
+        n = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if n == 0:
+            raise ConfigError(f"device = {pref}: CUDA sees no GPU on this machine; fix: --set device=auto "
+                              "(the GPU where there is one, else the CPU) or --set device=cpu")
+        if dev.index >= n:
+            raise ConfigError(f"device = {pref}: this process (local rank {local_rank}) needs cuda:{dev.index} "
+                              f"but CUDA sees {n} GPU(s); fix: start at most {n} processes per node "
+                              f"(torchrun --nproc_per_node {n}), or train on the CPU with --set device=cpu")
     return dev
+
+
+def local_rank() -> int:
+    """This process's rank on its node (0 outside torchrun)."""
+    return int(os.environ.get("LOCAL_RANK", os.environ.get("RANK", 0))) if launched_by_torchrun() else 0
+
+
+def check_device(device: str) -> torch.device:
+    """The device this process would train on; a missing GPU is a ConfigError (see `resolve_device`)."""
+    return resolve_device(device, local_rank())
 
 
 def setup(device: str = "auto") -> DistInfo:
@@ -54,7 +80,7 @@ def setup(device: str = "auto") -> DistInfo:
     if not launched_by_torchrun() or int(os.environ["WORLD_SIZE"]) <= 1:
         return DistInfo(device=resolve_device(device))
     rank, world = int(os.environ["RANK"]), int(os.environ["WORLD_SIZE"])
-    local = int(os.environ.get("LOCAL_RANK", rank))
+    local = local_rank()
     dev = resolve_device(device, local)
     if dev.type == "cuda":
         torch.cuda.set_device(dev)

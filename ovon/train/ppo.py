@@ -28,6 +28,7 @@ import torch
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
 from ovon.train.batches import episode_summary, features, imitation_loss, map_images
+from ovon.train.checkpoint import to_device
 from ovon.train.collect import RolloutCollector, acting_context, explained_variance, gae
 from ovon.train.config import FinetuneConfig, TrainConfig, reward_for
 from ovon.train.run import TrainRun, num_updates
@@ -123,7 +124,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
         if saved is not None:
             collector.restore(saved)
             gate_open = saved.get("actor_gate_open", gate_open)
-            ref_state = saved.get("ref_state")
+            ref_state = to_device(saved.get("ref_state"), dev)
             run.restore_rng(saved)
         total = num_updates(cfg, run.info.world_size)
         run.open_logger(total)

@@ -132,7 +132,7 @@ class TrainRun:
         (the caller restores its own parts, then `restore_rng(state)` last). None on a fresh run."""
         if not (self.resume_requested and (self.out / "checkpoint.pt").exists()):
             return None
-        ckpt = load_checkpoint(self.out, map_location=self.device)
+        ckpt = load_checkpoint(self.out)  # on the CPU: load_state_dict copies weights and optimiser state over
         if ckpt["world_size"] != self.info.world_size:
             raise ValueError(f"checkpoint was written by {ckpt['world_size']} ranks; this run has "
                              f"{self.info.world_size}")
