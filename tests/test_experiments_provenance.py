@@ -302,6 +302,36 @@ def test_another_scene_dataset_at_the_same_path_makes_finished_cells_stale(tmp_p
     assert cell_status(plan, plan.cells["eval:vlfm-noise"], {}).state == "done"
 
 
+def test_an_episode_file_edited_to_the_same_size_makes_finished_cells_stale(tmp_path, tiny_dataset, tiny_scenes):
+    """The episodes' content is an input (names and sizes alone missed a same-size edit); the hashes persist
+    in the scale folder by size and mtime, so a later status pass reads no file again."""
+    from ovon.experiments import state
+
+    data = tmp_path / "episodes"
+    shutil.copytree(tiny_dataset, data)
+    plan = _plan(tmp_path / "root", data, tiny_scenes)
+    _done(plan, "eval:vlfm")
+    _done(plan, "eval:vlfm-noise", inputs={"data": inputs(plan, plan.cells["eval:vlfm-noise"])["data"]})
+    cache = plan.base / state.HASH_CACHE
+    assert cache.is_file() and len(json.loads(cache.read_text())) == len(list(data.rglob("*.json.gz")))
+    victim = sorted(data.rglob("*.json.gz"))[0]
+    body = bytearray(victim.read_bytes())
+    body[len(body) // 2] ^= 0xFF  # another byte, the same size
+    victim.write_bytes(bytes(body))
+    st = cell_status(plan, plan.cells["eval:vlfm"], {})
+    assert (st.state, st.detail) == ("changed", "its input(s) episodes changed since it ran")
+    assert cell_status(plan, plan.cells["eval:vlfm-noise"], {}).state == "done"  # recorded names and sizes only
+    # the persisted hash is what a later pass uses while size and mtime hold
+    state._HASHES.clear()
+    entries = json.loads(cache.read_text())
+    entry = entries[str(victim)]
+    entries[str(victim)] = [entry[0], entry[1], "0" * 64]
+    cache.write_text(json.dumps(entries))
+    before = state.episodes_content_fingerprint(plan)
+    state._HASHES.clear()
+    os.utime(victim, ns=(victim.stat().st_atime_ns, victim.stat().st_mtime_ns + 1))
+    assert state.episodes_content_fingerprint(plan) != before  # a new mtime: read again
+
 def test_a_cell_whose_code_changed_while_it_ran_ran_with_both(tmp_path, monkeypatch) -> None:
     """The code is read when an attempt starts and when it ends: a tree edited meanwhile, or a new untracked
     module in the package, is not "a clean tree"."""

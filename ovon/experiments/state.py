@@ -359,20 +359,59 @@ def config_unknown(plan: Plan, ids: list[str]) -> list[str]:
 _HASHES: dict[tuple, str] = {}
 
 
-def file_hash(path: Path) -> str | None:
-    """Content hash of a file (cached by size and mtime within the process), None when absent."""
+HASH_CACHE = ".file_hashes.json"  # under the scale's folder: content hashes by path, size and mtime
+
+
+def file_hash(path: Path, persistent: dict[str, list] | None = None) -> str | None:
+    """Content hash of a file (cached by size and mtime within the process, and in `persistent` when
+    given), None when absent."""
     try:
         st = path.stat()
     except OSError:
         return None
     key = (str(path), st.st_size, st.st_mtime_ns)
     if key not in _HASHES:
-        h = hashlib.sha256()
-        with open(path, "rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                h.update(block)
-        _HASHES[key] = h.hexdigest()
+        known = (persistent or {}).get(key[0])
+        if known is not None and known[:2] == [st.st_size, st.st_mtime_ns]:
+            _HASHES[key] = known[2]
+        else:
+            h = hashlib.sha256()
+            with open(path, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    h.update(block)
+            _HASHES[key] = h.hexdigest()
+    if persistent is not None:
+        persistent[key[0]] = [st.st_size, st.st_mtime_ns, _HASHES[key]]
     return _HASHES[key]
+
+
+def _read_hash_cache(path: Path) -> dict[str, list]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}  # absent or torn by a crash: it is only a cache
+    ok = isinstance(data, dict) and all(isinstance(v, list) and len(v) == 3 for v in data.values())
+    return data if ok else {}
+
+
+def episodes_content_fingerprint(plan: Plan) -> str | None:
+    """Identity of the episode files by their content: an episode file edited to the same size (a changed
+    goal, a moved start) makes what read it stale. Why cheap enough: each file is read once per size and
+    mtime; the hashes persist in the scale folder's `.file_hashes.json`, so a status pass stats the files."""
+    root = plan.episodes_dir
+    files = sorted(p for p in root.rglob("*.json.gz") if p.is_file()) if root.is_dir() else []
+    if not files:
+        return None
+    cache_path = plan.base / HASH_CACHE
+    cache = _read_hash_cache(cache_path)
+    before = dict(cache)
+    h = hashlib.sha256()
+    for p in files:
+        h.update(f"{p.relative_to(root).as_posix()}\0{file_hash(p, cache)}\n".encode())
+    if cache != before and plan.base.is_dir():
+        with contextlib.suppress(OSError):  # read-only root: hash again next time
+            write_json(cache_path, cache)
+    return h.hexdigest()
 
 
 def data_fingerprint(plan: Plan) -> str | None:
@@ -402,8 +441,10 @@ def scenes_fingerprint(plan: Plan) -> str | None:
 
 
 def dataset_fingerprints(plan: Plan) -> dict[str, str | None]:
-    """The episodes' and the scenes' identities, which every non-data cell reads."""
-    return {"data": data_fingerprint(plan), "scenes": scenes_fingerprint(plan)}
+    """The episodes' and the scenes' identities, which every non-data cell reads. `data` (names and sizes)
+    is kept beside `episodes` (content) so that records from before the content was recorded still compare."""
+    return {"data": data_fingerprint(plan), "episodes": episodes_content_fingerprint(plan),
+            "scenes": scenes_fingerprint(plan)}
 
 
 def inputs(plan: Plan, cell: Cell, dataset: dict | None = None) -> dict[str, Any]:
