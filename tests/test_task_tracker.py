@@ -110,7 +110,12 @@ def test_timeout_ignored_goal():
     assert labelled([0.5, 1.0], stop=False, frames=[seen, frame()]) == "timeout_ignored_goal"
 
 
-def test_goal_below_one_percent_is_not_seen():
+def test_timeout_inside_the_success_region_is_ignored_goal_seen_or_not():
+    """The paper's table has no row for a timeout that ends inside the region (entered, never left); it
+    is `timeout_ignored_goal` (docs/spec.md), whether or not the goal was in view there."""
+    assert labelled([2.0, 3.0], stop=False, frames=[frame(), frame()]) == "timeout_ignored_goal"
+    assert labelled([2.0, 3.0], stop=False, frames=[frame(), frame({GOAL: 0.2})]) == "timeout_ignored_goal"
+    assert labelled([2.0, 2.5], stop=False, frames=[frame(), frame()]) == "timeout_missed_goal"  # never inside
     barely = frame({GOAL: 0.005})
     assert labelled([0.5, 1.0], stop=False, frames=[barely, barely]) == "timeout_missed_goal"
 
