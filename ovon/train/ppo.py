@@ -85,6 +85,27 @@ def reference_logits(reference, img, goal_seq: torch.Tensor, prev_seq: torch.Ten
     return logits[:, prefix:], state
 
 
+def critic_values(critic, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, start_seq: torch.Tensor,
+                  prefix: int, steps: int, state, bootstrap: bool) -> tuple[torch.Tensor, object]:
+    """A separate critic's values on the chunk's `steps` steps after `prefix` context steps (and on the
+    bootstrap observation after them), and its memory at the next chunk's start. Like the reference policy,
+    an LSTM critic carries its own (h, c) from chunk to chunk; a transformer's memory is the prefix."""
+    n = prefix + steps
+
+    def values(lo: int, hi: int, st):
+        obs = critic.make_obs(features(critic, map_images(img, lambda x: x[:, lo:hi])), goal_seq[:, lo:hi])
+        return critic.forward_seq(obs, prev_seq[:, lo:hi], start_seq[:, lo:hi], st)[1:]
+
+    if state is None and bootstrap:  # transformer: one pass over context, chunk and bootstrap step
+        v, _ = values(0, n + 1, None)
+        return v[:, prefix:], None
+    v, after = values(0, n, state)
+    if bootstrap:
+        v_boot, _ = values(n, n + 1, after)
+        v = torch.cat([v, v_boot], 1)
+    return v[:, prefix:], after
+
+
 def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
               init: str | None = None) -> dict:
     """Run PPO (from scratch, or fine-tuning `init`); returns the last logged metrics."""
@@ -96,7 +117,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
     try:
         envs, batch = run.open_envs(specs, reward_for(cfg, finetune), label=anchor == "expert")
         policy = run.policy_for(batch)
-        reference = None
+        reference = critic_net = None
         if finetune:
             if anchor == "kl":  # the initial policy, frozen, before the critic is re-initialised
                 reference = copy.deepcopy(policy).eval().requires_grad_(False)
@@ -106,6 +127,12 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             if ft.freeze_prev_action:
                 for p in groups["prev_action"]:
                     p.requires_grad_(False)
+            if ft.critic == "separate":  # its own copy of the initial network; the policy's head goes unused
+                critic_net = copy.deepcopy(policy).requires_grad_(True)
+                critic_net.reinit_critic()
+                critic_net.action_head.requires_grad_(False)
+                policy.critic_head.requires_grad_(False)
+                groups["critic"] = [p for p in critic_net.parameters() if p.requires_grad]
             critic_lr, actor_lr = finetune_lrs(ft, 0)
             param_groups = [{"params": groups["critic"], "lr": critic_lr, "name": "critic"},
                             {"params": groups["actor"], "lr": actor_lr, "name": "actor"}]
@@ -115,20 +142,25 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
         else:
             optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
         model = dist.wrap(policy, run.info)
+        critic_model = dist.wrap(critic_net, run.info) if critic_net is not None else None
         n_envs, T = cfg.num_envs, cfg.rollout_steps
         prefix = acting_context(policy.cfg) if pc.context_prefix else 0
         collector = RolloutCollector(envs, batch, policy, dev, prefix=prefix)
         gate_open = ft.critic_warmup_ev <= 0  # the explained-variance gate of the actor (latched)
         ref_state = None  # the reference LSTM's memory at the next chunk's start
+        critic_state = None  # the separate LSTM critic's, likewise
         saved = run.restore(optimizer)
         if saved is not None:
             collector.restore(saved)
             gate_open = saved.get("actor_gate_open", gate_open)
             ref_state = to_device(saved.get("ref_state"), dev)
+            if critic_net is not None:
+                critic_net.load_state_dict(saved["critic_net"])
+                critic_state = to_device(saved.get("critic_state"), dev)
             run.restore_rng(saved)
         total = num_updates(cfg, run.info.world_size)
         run.open_logger(total)
-        trainable = [p for p in policy.parameters() if p.requires_grad]
+        trainable = [p for net in (policy, critic_net) if net is not None for p in net.parameters() if p.requires_grad]
 
         def choose(logits: torch.Tensor, b) -> tuple[torch.Tensor, torch.Tensor]:
             d = policy.distribution(logits / pc.temperature)
@@ -155,6 +187,12 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 obs = policy.make_obs(features(policy, img), goal_seq)
                 logits, values, _ = policy.forward_seq(obs, prev_seq, start_seq, state0)
                 logits, values = logits[:, P:], values[:, P:]
+                critic_state0 = critic_state
+                if critic_net is not None:  # its memory at the first chunk is the policy's (fresh: zeros)
+                    if critic_state0 is None and state0 is not None:
+                        critic_state0 = state0
+                    values, critic_state = critic_values(critic_net, img, goal_seq, prev_seq, start_seq, P, T,
+                                                         critic_state0, bootstrap=True)
                 old_logp = policy.distribution(logits[:, :T] / pc.temperature).log_prob(act_seq)
                 adv, returns = gae(rew, values, ro.dones.to(dev), pc.gamma, pc.gae_lambda)
                 ev = explained_variance(values[:, :T], returns)
@@ -182,6 +220,10 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                     logits, v = model(obs, prev_seq[mbd, :P + T], start_seq[mbd, :P + T],
                                       _index_state(state0, mbd))
                     logits, v = logits[:, P:], v[:, P:]
+                    if critic_model is not None:
+                        cobs = critic_net.make_obs(features(critic_net, mb_img), goal_seq[mbd, :P + T])
+                        v = critic_model(cobs, prev_seq[mbd, :P + T], start_seq[mbd, :P + T],
+                                         _index_state(critic_state0, mbd))[1][:, P:]
                     d = policy.distribution(logits / pc.temperature)
                     logp = d.log_prob(act_seq[mbd])
                     ratio = (logp - old_logp[mbd]).exp()
@@ -223,8 +265,10 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                         "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
                 run.log(update + 1, last)
             if run.checkpoint_due(update + 1, total):
+                extra = {} if critic_net is None else {"critic_net": critic_net.state_dict(),
+                                                       "critic_state": critic_state}
                 run.save(update + 1, optimizer, {**collector.state(), "actor_gate_open": gate_open,
-                                                 "ref_state": ref_state})
+                                                 "ref_state": ref_state, **extra})
                 run.stop_if_requested()
         run.finish(total)
     finally:
