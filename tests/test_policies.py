@@ -206,6 +206,27 @@ def test_save_load_and_reinit_critic(tmp_path) -> None:
     assert {"critic", "actor", "prev_action"} == set(groups)
 
 
+def test_load_puts_the_module_on_map_location_and_keeps_extras_on_the_cpu(tmp_path) -> None:
+    """`map_location` is where the policy runs: its weights go there ("meta" stands in for a GPU), while
+    the extras (the text table a `TableTextEncoder` turns into numpy) stay on the CPU. Before, the module
+    stayed on the CPU and the extras moved: an agent on CUDA failed at load or at its first step."""
+    p = _policy("lstm")
+    p.save(tmp_path / "p.pt", extra={"text_table": {"couch": torch.randn(TXT)}})
+    q = ActorCritic.load(tmp_path / "p.pt", map_location="meta")
+    assert all(t.is_meta for t in q.parameters())
+    assert q.checkpoint_extra["text_table"]["couch"].device.type == "cpu"
+
+
+@pytest.mark.parametrize("core", ["transformer", "lstm"])
+def test_clone_is_an_independent_equal_copy(core: str) -> None:
+    p = _policy(core)
+    q = p.clone()
+    obs, prev = _data(2, 5)
+    assert torch.equal(p(obs, prev)[0], q(obs, prev)[0])
+    with torch.no_grad():
+        next(q.parameters()).add_(1.0)
+    assert not torch.equal(p(obs, prev)[0], q(obs, prev)[0])
+
 def test_cnn_policy_owns_encoder(tmp_path) -> None:
     enc = dataclasses.replace(EncoderConfig(image="cnn"), cnn_dim=IMG, cnn_channels=(8, 8))
     p = build_policy(policy_preset("tiny"), IMG, TXT, enc)

@@ -173,6 +173,19 @@ def test_to_device_moves_every_acting_state_kind() -> None:
     assert isinstance(moved["nt"], Pair) and moved["nt"].h.is_meta and moved["nt"].c == 3
     assert moved["n"] == [None] and not kv.k.is_meta  # the original is untouched
 
+def test_cuda_rng_states_of_more_gpus_than_this_machine_has(monkeypatch) -> None:
+    """A checkpoint holds one CUDA generator state per GPU the saving process saw; resuming where fewer
+    are visible restores those there are (torch raised IndexError)."""
+    from ovon.train.checkpoint import rng_state, set_rng_state
+
+    got: list = []
+    state = {**rng_state(), "cuda": [torch.zeros(8, dtype=torch.uint8), torch.ones(8, dtype=torch.uint8)]}
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    monkeypatch.setattr(torch.cuda, "set_rng_state_all", lambda states: got.extend(states))
+    set_rng_state(state)
+    assert len(got) == 1 and torch.equal(got[0], torch.zeros(8, dtype=torch.uint8))
+
 def test_a_rank_without_its_gpu_is_refused_in_one_line(monkeypatch) -> None:
     from ovon.config.base import ConfigError
     from ovon.train.distributed import resolve_device

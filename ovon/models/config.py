@@ -10,7 +10,18 @@ import dataclasses
 from dataclasses import dataclass
 from typing import ClassVar, Literal
 
-from ovon.config.base import Each, Positive, Range, constrained, in_range, non_empty, non_negative, positive, rule
+from ovon.config.base import (
+    Each,
+    Pattern,
+    Positive,
+    Range,
+    constrained,
+    in_range,
+    non_empty,
+    non_negative,
+    positive,
+    rule,
+)
 
 ImageEncoderName = Literal["oracle-vl", "siglip", "cnn", "depth-grid"]
 TextEncoderName = Literal["minilm-text", "siglip-text"]
@@ -31,7 +42,9 @@ class EncoderConfig:
     # SigLIP: a hub id found in the local HF cache, or a folder written by `save_pretrained`.
     siglip_model: str = non_empty("google/siglip-base-patch16-256")
     siglip_normalize: bool = True  # L2-normalise SigLIP embeddings (cosine-ready)
-    device: str = non_empty("cpu")
+    # Where SigLIP runs (in each env worker for training, in the agent for evaluation); a torch device name,
+    # not `auto`: the workers do not share the learner's GPU unless asked to.
+    device: str = constrained("cpu", Pattern(r"cpu|cuda(:[0-9]+)?|mps", "cpu, cuda, cuda:N or mps"))
     # Oracle vision-language encoder (oracle perception).
     oracle_grid: int = in_range(2, 1, 32)  # grid x grid spatial cells
     oracle_global: bool = True  # prepend the whole-frame pooled vector

@@ -84,7 +84,8 @@ class LSTMCore(nn.Module):
             y, (h, c) = self.lstm(x, (h, c))
             return y, (h, c)
         starts = episode_starts.bool()
-        cuts = [0] + [i for i in range(1, t) if bool(starts[:, i].any())] + [t]
+        # one device->host copy for all cut points (per-step checks would sync a GPU once per step)
+        cuts = [0] + [i + 1 for i in starts[:, 1:].any(0).nonzero().flatten().tolist()] + [t]
         outs = []
         for a, e in zip(cuts[:-1], cuts[1:]):
             keep = (~starts[:, a]).to(h.dtype)[None, :, None]

@@ -13,6 +13,7 @@ Why one wrapper: trainers, evaluators and checkpoints see a single interface wha
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 from typing import Any
 
@@ -235,14 +236,23 @@ class ActorCritic(nn.Module):
     def load(cls, path: str | Path, map_location: str | torch.device = "cpu", flag: str = "policy") -> ActorCritic:
         """Rebuild a policy saved by `save` (any core); `path` may be its run folder. A file that is not
         one is refused in one line naming `flag` (`read_policy_file`)."""
-        ckpt = read_policy_file(path, flag, map_location)
+        ckpt = read_policy_file(path, flag, "cpu")  # extras (the text table) stay on the CPU, where they are read
         cfg = from_dict(PolicyConfig, ckpt["policy_config"])
         enc = ckpt.get("encoder_config")
         enc_cfg = None if enc is None else from_dict(EncoderConfig, enc)
         policy = build_policy(cfg, ckpt["image_dim"], ckpt["text_dim"], enc_cfg)
         policy.load_state_dict(ckpt["state_dict"])
         policy.checkpoint_extra = ckpt.get("extra", {})
-        return policy
+        return policy.to(map_location)  # load_state_dict copies into the module's own (CPU) parameters
+
+    def clone(self) -> ActorCritic:
+        """A deep copy (frozen reference, acting copy, separate critic). Why not `copy.deepcopy` alone: the
+        copy's cuDNN LSTM weights are no longer one contiguous chunk, and every call would re-pack them."""
+        twin = copy.deepcopy(self)
+        for m in twin.modules():
+            if isinstance(m, nn.LSTM):
+                m.flatten_parameters()
+        return twin
 
 
 class TransformerPolicy(ActorCritic):

@@ -12,7 +12,6 @@ on a CPU); with `dagger.beta_*` > 0 the expert's own action drives the env with 
 
 from __future__ import annotations
 
-import copy
 import functools
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -53,7 +52,7 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
         optimizer = torch.optim.Adam(policy.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
         # With overlap the student acts with its own copy (the weights of the update before last) and the
         # learner draws its minibatches from its own generator, so acting and learning never race.
-        actor = copy.deepcopy(policy) if overlap else policy
+        actor = policy.clone() if overlap else policy
         learn_rng = torch.Generator().manual_seed(cfg.seed * 7919 + 1) if overlap else None
         n_envs, T = cfg.num_envs, cfg.rollout_steps
         collector = RolloutCollector(envs, batch, policy, dev)

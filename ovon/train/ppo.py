@@ -19,7 +19,6 @@ sequences; an LSTM starts each chunk from its acting state at the chunk's start.
 
 from __future__ import annotations
 
-import copy
 import time
 from pathlib import Path
 
@@ -120,7 +119,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
         reference = critic_net = None
         if finetune:
             if anchor == "kl":  # the initial policy, frozen, before the critic is re-initialised
-                reference = copy.deepcopy(policy).eval().requires_grad_(False)
+                reference = policy.clone().eval().requires_grad_(False)
             if ft.reinit_critic:
                 policy.reinit_critic()
             groups = policy.parameter_groups()
@@ -128,7 +127,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 for p in groups["prev_action"]:
                     p.requires_grad_(False)
             if ft.critic == "separate":  # its own copy of the initial network; the policy's head goes unused
-                critic_net = copy.deepcopy(policy).requires_grad_(True)
+                critic_net = policy.clone().requires_grad_(True)
                 critic_net.reinit_critic()
                 critic_net.action_head.requires_grad_(False)
                 policy.critic_head.requires_grad_(False)

@@ -20,7 +20,7 @@ import torch
 from ovon.config.task import TaskConfig
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.checkpoint import export_policy, load_checkpoint, rng_state, save_checkpoint, seed_everything
+from ovon.train.checkpoint import export_policy, load_checkpoint, rng_state, save_checkpoint, seed_everything, to_device
 from ovon.train.checkpoint import set_rng_state as _set_rng_state
 from ovon.train.config import TrainConfig
 from ovon.train.logging import RunLogger
@@ -165,7 +165,8 @@ class TrainRun:
         """Gather every rank's state (RNG, envs, acting memory) and let rank 0 write checkpoint + policy."""
         from ovon.config.base import to_dict
 
-        ranks = dist.gather_objects({**rank_state, "rng": rng_state()}, self.info)
+        # on the CPU first: a CUDA tensor unpickled by another rank would land on this rank's GPU
+        ranks = dist.gather_objects(to_device({**rank_state, "rng": rng_state()}, "cpu"), self.info)
         if self.is_main:
             cfg = self.cfg
             save_checkpoint(self.out, {"algo": self.algo, "config": to_dict(cfg), "policy": self.policy.state_dict(),
