@@ -85,9 +85,9 @@ def reference_logits(reference, img, goal_seq: torch.Tensor, prev_seq: torch.Ten
 
 
 def critic_values(critic, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, start_seq: torch.Tensor,
-                  prefix: int, steps: int, state, bootstrap: bool) -> tuple[torch.Tensor, object]:
-    """A separate critic's values on the chunk's `steps` steps after `prefix` context steps (and on the
-    bootstrap observation after them), and its memory at the next chunk's start. Like the reference policy,
+                  prefix: int, steps: int, state) -> tuple[torch.Tensor, object]:
+    """A separate critic's values on the chunk's `steps` steps after `prefix` context steps and on the
+    bootstrap observation after them, and its memory at the next chunk's start. Like the reference policy,
     an LSTM critic carries its own (h, c) from chunk to chunk; a transformer's memory is the prefix."""
     n = prefix + steps
 
@@ -95,14 +95,12 @@ def critic_values(critic, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, s
         obs = critic.make_obs(features(critic, map_images(img, lambda x: x[:, lo:hi])), goal_seq[:, lo:hi])
         return critic.forward_seq(obs, prev_seq[:, lo:hi], start_seq[:, lo:hi], st)[1:]
 
-    if state is None and bootstrap:  # transformer: one pass over context, chunk and bootstrap step
+    if state is None:  # transformer: one pass over context, chunk and bootstrap step
         v, _ = values(0, n + 1, None)
         return v[:, prefix:], None
-    v, after = values(0, n, state)
-    if bootstrap:
-        v_boot, _ = values(n, n + 1, after)
-        v = torch.cat([v, v_boot], 1)
-    return v[:, prefix:], after
+    v, after = values(0, n, state)  # LSTM: the memory after the chunk, then the bootstrap step from it
+    v_boot, _ = values(n, n + 1, after)
+    return torch.cat([v, v_boot], 1)[:, prefix:], after
 
 
 def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
@@ -191,7 +189,7 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                     if critic_state0 is None and state0 is not None:
                         critic_state0 = state0
                     values, critic_state = critic_values(critic_net, img, goal_seq, prev_seq, start_seq, P, T,
-                                                         critic_state0, bootstrap=True)
+                                                         critic_state0)
                 old_logp = policy.distribution(logits[:, :T] / pc.temperature).log_prob(act_seq)
                 adv, returns = gae(rew, values, ro.dones.to(dev), pc.gamma, pc.gae_lambda)
                 ev = explained_variance(values[:, :T], returns)
