@@ -30,6 +30,8 @@ def _bad_files(tmp_path: Path) -> dict[str, Path]:
     files = {"random": tmp_path / "rand.pt", "empty": tmp_path / "empty.pt", "truncated": tmp_path / "trunc.pt",
              "list": tmp_path / "list.pt", "resume state": tmp_path / "run" / "checkpoint.pt"}
     files["random"].write_bytes(os.urandom(3000))
+    files["pickle-like"] = tmp_path / "pickle_like.pt"  # starts with a pickle PROTO opcode: torch warns first
+    files["pickle-like"].write_bytes(b"\x80\x94" + os.urandom(3000))
     files["empty"].write_bytes(b"")
     files["truncated"].write_bytes(good.read_bytes()[:1500])
     torch.save([1, 2], files["list"])
@@ -58,7 +60,8 @@ def _ovon(*args: str, cwd: Path) -> subprocess.CompletedProcess:
 def test_evaluate_refuses_a_bad_or_other_task_checkpoint_before_its_run_folder(tmp_path, tiny_dataset, tiny_scenes):
     bad = _bad_files(tmp_path)
     pointnav, objectnav = _policy_file(tmp_path / "pn.pt", "pointnav"), _policy_file(tmp_path / "on.pt", "objectnav")
-    cases = [(["--task", "pointnav", "--procedural", "80000", "--checkpoint", str(bad["random"])], "torch can read"),
+    cases = [(["--task", "pointnav", "--procedural", "80000", "--checkpoint", str(bad["pickle-like"])],
+              "torch can read"),
              (["--task", "pointnav", "--procedural", "80000", "--checkpoint", str(bad["list"])], "not an ovon policy"),
              (["--task", "pointnav", "--procedural", "80000", "--checkpoint", str(objectnav)],
               "is an ObjectNav policy, this is a PointNav evaluation; fix: leave --task pointnav out"),

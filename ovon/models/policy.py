@@ -14,6 +14,7 @@ Why one wrapper: trainers, evaluators and checkpoints see a single interface wha
 from __future__ import annotations
 
 import copy
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -296,7 +297,9 @@ def read_policy_file(path: str | Path, flag: str = "policy", map_location: str |
     resume_state = (f"{where}: {p} is a training run's resume state, not a policy; fix: pass "
                     f"{p.parent / 'policy.pt'}")
     try:
-        ckpt = torch.load(p, map_location=map_location, weights_only=True)
+        with warnings.catch_warnings():  # a foreign file that starts like a pickle makes torch warn first
+            warnings.simplefilter("ignore")
+            ckpt = torch.load(p, map_location=map_location, weights_only=True)
     except Exception as e:  # noqa: BLE001 - torch raises many types (unpickling, zip, EOF) for a bad file
         if p.name == "checkpoint.pt":
             raise ValueError(resume_state) from None

@@ -61,7 +61,9 @@ def _read_cache(path: Path, warn: bool = True) -> dict | None:
     import warnings
 
     try:
-        data = torch.load(path, weights_only=True)
+        with warnings.catch_warnings():  # torch's own pickle-protocol warning would precede ours
+            warnings.simplefilter("ignore")
+            data = torch.load(path, weights_only=True)
     except Exception as e:  # noqa: BLE001 - torch raises many types for a torn file
         data, why = None, type(e).__name__
     else:
