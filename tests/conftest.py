@@ -11,6 +11,20 @@ import pytest
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("LP_NUM_THREADS", "0")
+# The shell's settings must not change what the tests see (subprocesses inherit os.environ):
+# OVON_DEBUG turns every one-line refusal into a traceback; a RAY_ADDRESS, or a `ray start` cluster
+# that Ray would attach to, would run the tests' tasks in someone else's workers ("local": a new one).
+os.environ.pop("OVON_DEBUG", None)
+os.environ["RAY_ADDRESS"] = "local"
+
+try:  # the same examples on every run (CI must not fail by chance); HYPOTHESIS_PROFILE=explore searches anew
+    from hypothesis import settings
+
+    settings.register_profile("ci", derandomize=True)
+    settings.register_profile("explore", derandomize=False)
+    settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+except ImportError:  # pragma: no cover
+    pass
 
 try:
     import torch

@@ -4,6 +4,7 @@ file that is not what it should be is one line naming it, before any run folder 
 from __future__ import annotations
 
 import os
+import random
 import subprocess
 import sys
 import warnings
@@ -29,9 +30,9 @@ def _bad_files(tmp_path: Path) -> dict[str, Path]:
     good = _policy_file(tmp_path / "good.pt")
     files = {"random": tmp_path / "rand.pt", "empty": tmp_path / "empty.pt", "truncated": tmp_path / "trunc.pt",
              "list": tmp_path / "list.pt", "resume state": tmp_path / "run" / "checkpoint.pt"}
-    files["random"].write_bytes(os.urandom(3000))
+    files["random"].write_bytes(random.Random(0).randbytes(3000))
     files["pickle-like"] = tmp_path / "pickle_like.pt"  # starts with a pickle PROTO opcode: torch warns first
-    files["pickle-like"].write_bytes(b"\x80\x94" + os.urandom(3000))
+    files["pickle-like"].write_bytes(b"\x80\x94" + random.Random(1).randbytes(3000))
     files["empty"].write_bytes(b"")
     files["truncated"].write_bytes(good.read_bytes()[:1500])
     torch.save([1, 2], files["list"])

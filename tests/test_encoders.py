@@ -231,6 +231,8 @@ def test_siglip_end_to_end(tiny_siglip: str) -> None:
 
 
 def test_siglip_missing_model_fails_fast(tmp_path) -> None:
+    import transformers  # noqa: F401 - its first import (seconds) is not what this test times
+
     for name in ("google/siglip-base-patch16-256-not-here", str(tmp_path / "nothing")):
         t0 = time.perf_counter()
         with pytest.raises(ModelNotAvailableError, match="huggingface-cli download"):

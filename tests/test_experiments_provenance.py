@@ -346,9 +346,11 @@ def test_a_cell_whose_code_changed_while_it_ran_ran_with_both(tmp_path, monkeypa
     (repo / "pkg" / "__init__.py").write_text("")
 
     def git(*a: str) -> None:
-        subprocess.run(["git", "-C", str(repo), *a], check=True, capture_output=True,
+        # the user's git config (commit signing, hooks) must not decide this test
+        subprocess.run(["git", "-C", str(repo), "-c", "commit.gpgsign=false", "-c", "core.hooksPath=/dev/null", *a],
+                       check=True, capture_output=True,
                        env={**os.environ, "GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t",
-                            "GIT_COMMITTER_EMAIL": "t@t"})
+                            "GIT_COMMITTER_EMAIL": "t@t", "GIT_CONFIG_GLOBAL": os.devnull, "GIT_CONFIG_NOSYSTEM": "1"})
 
     git("init", "-q")
     git("add", "-A")

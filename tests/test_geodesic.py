@@ -138,13 +138,10 @@ def test_distance_is_cached_and_fast(gap_nav):
     assert distance_field(g, goals.copy()) is f
     q = np.array([3.3, 0.0, 2.2])
     assert f.distance(q) == pytest.approx(math.hypot(2.3, 2.8), rel=0.02)
-    import time
+    import timeit
 
-    n = 2000
-    t = time.perf_counter()
-    for _ in range(n):
-        f.distance(q)
-    assert (time.perf_counter() - t) / n < 20e-6  # ~1-2 us measured; generous for a busy CI box
+    # best of 5 repeats: a busy CI box may deschedule one repeat, not all of them (~1-2 us measured)
+    assert min(timeit.repeat(lambda: f.distance(q), number=2000, repeat=5)) / 2000 < 20e-6
 
 
 def test_path_properties(gap_nav):

@@ -8,7 +8,9 @@ The venv must be this checkout's (`make install`). Three documented departures k
 2-core machine:
 
 - SHRINK: sizes are substituted (scene counts, episodes per scene / split / run, seeds, render size,
-  `--preset cpu-small` -> `tiny`, bench steps); the commands, options and code are otherwise unchanged.
+  `--preset cpu-small` -> `tiny`, bench steps) and the README's fixed ports (50555, 50556) become ports
+  free when the test starts (a port taken by another run would make a block talk to someone else's
+  server); the commands, options and code are otherwise unchanged.
 - `make <target>` lines run as `make -n <target>` (a dry run: the target exists and expands), since
   `make test` inside the test suite would run the suite recursively.
 - `python benchmarks/X.py OUT` lines run this checkout's scripts from a copy of `benchmarks/` in the temp
@@ -24,6 +26,7 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -51,10 +54,27 @@ SHRINK: list[tuple[str, str]] = [
 ]
 
 
+def _free_ports(n: int) -> list[int]:
+    import socket
+
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+README_PORTS = ("50555", "50556")
+PORTS = dict(zip(README_PORTS, map(str, _free_ports(len(README_PORTS)))))
+
+
 def shrink(code: str) -> str:
     for pattern, repl in SHRINK:
         code = re.sub(pattern, repl, code)
-    return code
+    return re.sub(r"\b(" + "|".join(README_PORTS) + r")\b", lambda m: PORTS[m.group(1)], code)
 
 
 def readme_blocks(text: str) -> list[tuple[str, str, str]]:
@@ -120,7 +140,21 @@ def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: 
         cmd = ["bash", "-euo", "pipefail", str(script)]
     else:
         pytest.fail(f"README block in an unknown language {lang!r}: teach tests/test_readme.py to run it")
-    res = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+    # its own process group, killed whole on a timeout: a server started with `&` must not outlive it
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        pytest.fail(f"README {lang} block ran past {timeout:g} s:\n{code}\n--- stderr\n{err[-3000:]}")
+    finally:
+        try:  # whatever the block left in the background (a server whose trap did not run)
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    res = subprocess.CompletedProcess(cmd, proc.returncode, out, err)
     assert res.returncode == 0, f"README {lang} block failed:\n{code}\n--- stdout\n{res.stdout[-3000:]}\n" \
                                 f"--- stderr\n{res.stderr[-3000:]}"
 

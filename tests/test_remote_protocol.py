@@ -212,6 +212,19 @@ def test_act_batch_sees_every_pending_stream_at_once():
     assert agent.batches == [["1/0", "1/1", "1/2", "1/3"]]
 
 
+def test_a_client_that_only_shook_hands_says_goodbye():
+    """`check_remote` connects, reads the hello and closes: the server must free that session at once. The
+    answer may arrive before the socket monitor's CONNECTED event is read; the goodbye must not depend on
+    which came first (it did: one session in three was left for the server's hour-long idle expiry)."""
+    with serving(Counter) as server:
+        for _ in range(8):
+            Client("127.0.0.1", server.port, timeout_s=5).close()
+        deadline = time.monotonic() + 10
+        while server._sessions and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert not server._sessions
+
+
 def test_token_is_required_when_the_server_has_one():
     with serving(Counter, token="s3cret") as server:
         for bad in (None, "wrong"):
@@ -230,7 +243,8 @@ def test_a_hung_agent_times_out_and_nothing_listening_is_named():
             return 1
 
     with serving(Hung) as server:
-        client = Client("127.0.0.1", server.port, timeout_s=0.5)
+        client = Client("127.0.0.1", server.port, timeout_s=10)  # a stalled handshake is not what is tested
+        client.timeout_s = 0.5
         t = time.monotonic()
         with pytest.raises(RemoteError, match=r"did not answer step 3 within 0.5 s: no answer") as e:
             client.act([{"stream": 0, "obs": obs(), "info": {}}], "step 3")

@@ -569,6 +569,9 @@ class Client:
                         f"ovon_agent protocol ({e})",
                         "protocol",
                     ) from None
+                # an answer proves the connection even when the monitor's CONNECTED event is still queued
+                # (close() says goodbye only on a connection it knows of)
+                self._connected = True
                 if reply.get("id") != rid:
                     continue  # a late answer to a call that timed out
                 if reply["op"] == "error":
@@ -602,6 +605,7 @@ class Client:
         """Tell the server to free this connection's agents (best effort), then close."""
         if self._context.closed:
             return
+        self._events()  # a disconnection the monitor saw since the last call: no goodbye to send
         if self._connected and not self._lost:
             try:
                 self._socket.send_multipart(pack({"op": "close", "id": 0}), zmq.NOBLOCK)
