@@ -19,6 +19,21 @@ ROOT = Path(__file__).resolve().parents[1]
 OUTPUTS = ("episodes.jsonl", "summary.json", "table.md", "run_identity.json")
 
 
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is `pid`: from /proc (slim Linux images have no pgrep), else pgrep (macOS)."""
+    if not Path("/proc/self/stat").exists():
+        return sorted(int(x) for x in subprocess.run(["pgrep", "-P", str(pid)], capture_output=True,
+                                                     text=True).stdout.split())
+    kids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()  # after the command name, which may hold spaces
+        except (OSError, IndexError):
+            continue  # the process ended meanwhile
+        if int(fields[1]) == pid:
+            kids.append(int(stat.parent.name))
+    return sorted(kids)
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
@@ -139,8 +154,7 @@ def kill_and_resume(cmd: list[str], out: Path, progress, stops: list[int], env: 
         deadline = time.time() + 600
         while p.poll() is None and progress(out) < stop and time.time() < deadline:
             time.sleep(0.02)
-        seen += [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
-                                                text=True).stdout.split()]
+        seen += _children(p.pid)
         p.send_signal(signal.SIGKILL)  # the main process only: its workers must follow it
         p.wait()
     res = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=1200)
@@ -257,8 +271,7 @@ def test_sigterm_stops_train_after_its_update_with_a_checkpoint_and_the_same_com
     deadline = time.time() + 600
     while p.poll() is None and len(read_metrics(out)) < 2 and time.time() < deadline:
         time.sleep(0.02)
-    workers = [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
-                                              text=True).stdout.split()]
+    workers = _children(p.pid)
     assert p.poll() is None and workers, "the run should be mid-way, with its env workers"
     assert not (out / "checkpoint.pt").exists(), "no checkpoint is scheduled before the last update"
     if group:
