@@ -89,7 +89,8 @@ def test_bc_resume_reproduces_losses(tmp_path: Path) -> None:
         assert torch.equal(x, y)
 
 
-@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-context", "dagger-overlap", "ppo"])
+@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-context", "dagger-overlap", "dagger-frontier",
+                                  "ppo"])
 def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
     """Envs replay their current episode, the acting memory, the DAgger buffer (with its chunks' context
     views) and every RNG are restored (with `dagger.overlap` also the acting copy and the learner's
@@ -99,6 +100,14 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
 
     extra: dict = {}
     n, split = 4, 2
+    expert = "shortest-path"
+    if algo == "dagger-frontier":  # the cpu recipe's teacher: its chosen frontier and re-choice clock resume too
+        from ovon.experts.config import FrontierExpertConfig
+
+        algo, expert = "dagger", "frontier"
+        extra = {"dagger": DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=4, buffer_rollouts=3, grad_steps=2,
+                                        sample_rollouts=2),
+                 "frontier_expert": FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5)}
     if algo == "dagger-aggregated":
         algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2)}
     if algo == "dagger-context":
@@ -110,7 +119,7 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
                  "checkpoint_every": 3}
     if algo == "ppo":  # a PPO minibatch holds whole envs: one env, one minibatch
         extra = {"ppo": PPOConfig(minibatches=1)}
-    cfg = train_preset("tiny", algo=algo, expert="shortest-path", num_envs=1, rollout_steps=6,
+    cfg = train_preset("tiny", algo=algo, expert=expert, num_envs=1, rollout_steps=6,
                        max_updates=n, text_cache=table_path, **extra)
     train(cfg, house_specs, tmp_path / "straight")
     train(dataclasses.replace(cfg, max_updates=split), house_specs, tmp_path / "split")
