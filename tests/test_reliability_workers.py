@@ -34,6 +34,7 @@ def _children(pid: int) -> list[int]:
             kids.append(int(stat.parent.name))
     return sorted(kids)
 
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
