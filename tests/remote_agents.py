@@ -1,9 +1,11 @@
-"""Agents served in the remote-agent tests (`ovon serve tests.remote_agents:X` from the repository root), and
-`serving`, a server on a free loopback port in a thread that is always stopped."""
+"""Agents served in the remote-agent tests (`ovon serve tests.remote_agents:X` from the repository root),
+`serving`, a server on a free loopback port in a thread that is always stopped, and `free_ports`, ports for a
+server that must be told its port before it starts (the README's)."""
 
 from __future__ import annotations
 
 import os
+import socket
 import threading
 import zlib
 from contextlib import contextmanager
@@ -31,6 +33,22 @@ class OracleProbe(RandomAgent):
             f"{p.world.key}|{p.distance_to_goal}"
         )
         return 1 + zlib.crc32(key.encode()) % 3
+
+
+def free_ports(n: int = 1) -> list[int]:
+    """n distinct loopback ports that were free a moment ago (bound together, then closed).
+
+    Racy by nature: another process may take one before the server binds it. Prefer port 0 wherever the
+    server reports the port it bound (`Server(..., 0).port`, the line `ovon serve --port 0` prints); else
+    pick as late as possible and start the server again, on a fresh port, if it says "Address already in use"."""
+    socks = [socket.socket() for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
 
 
 @contextmanager

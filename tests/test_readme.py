@@ -9,8 +9,9 @@ The venv must be this checkout's (`make install`). Three documented departures k
 
 - SHRINK: sizes are substituted (scene counts, episodes per scene / split / run, seeds, render size,
   `--preset cpu-small` -> `tiny`, bench steps) and the README's fixed ports (50555, 50556) become ports
-  free when the test starts (a port taken by another run would make a block talk to someone else's
-  server); the commands, options and code are otherwise unchanged.
+  free just before the first block naming each runs (a port taken by another run would make a block talk
+  to someone else's server); the commands, options and code are otherwise unchanged. A block whose server
+  finds its port taken after all ("Address already in use") runs once more on fresh ports.
 - `make <target>` lines run as `make -n <target>` (a dry run: the target exists and expands), since
   `make test` inside the test suite would run the suite recursively.
 - `python benchmarks/X.py OUT` lines run this checkout's scripts from a copy of `benchmarks/` in the temp
@@ -33,6 +34,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.remote_agents import free_ports
+
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 
@@ -54,27 +57,24 @@ SHRINK: list[tuple[str, str]] = [
 ]
 
 
-def _free_ports(n: int) -> list[int]:
-    import socket
-
-    socks = [socket.socket() for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind(("127.0.0.1", 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
-
-
 README_PORTS = ("50555", "50556")
-PORTS = dict(zip(README_PORTS, map(str, _free_ports(len(README_PORTS)))))
+README_PORT = re.compile(r"\b(" + "|".join(README_PORTS) + r")\b")
 
 
-def shrink(code: str) -> str:
+class Ports(dict):
+    """README port -> a port free when first asked for (just before the first block naming it runs, not
+    minutes earlier), distinct from those handed out before."""
+
+    def __missing__(self, readme_port: str) -> str:
+        taken = set(self.values())
+        self[readme_port] = port = next(str(p) for p in free_ports(len(taken) + 1) if str(p) not in taken)
+        return port
+
+
+def shrink(code: str, ports: Ports) -> str:
     for pattern, repl in SHRINK:
         code = re.sub(pattern, repl, code)
-    return re.sub(r"\b(" + "|".join(README_PORTS) + r")\b", lambda m: PORTS[m.group(1)], code)
+    return README_PORT.sub(lambda m: ports[m.group(1)], code)
 
 
 def readme_blocks(text: str) -> list[tuple[str, str, str]]:
@@ -122,11 +122,31 @@ def _shell(code: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: float) -> None:
-    code = shrink(code)
+def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: float, ports: Ports,
+              saved_files: dict[Path, str]) -> None:
+    """Run one README block (shrunk); `saved_files` (file -> README code) collects the "Save ... as" files.
+    A failure with "Address already in use" (a port picked free was taken before the block's server bound
+    it) gets the ports it names picked anew, the saved files rewritten with them, and one more run."""
+    res = _run_block_once(lang, code, before, cwd, env, timeout, ports, saved_files)
+    named = set(README_PORT.findall(code))
+    if res.returncode != 0 and named and "Address already in use" in res.stderr:
+        for p in named:
+            del ports[p]
+        for path, original in saved_files.items():
+            path.write_text(shrink(original, ports))
+        res = _run_block_once(lang, code, before, cwd, env, timeout, ports, saved_files)
+    code = shrink(code, ports)
+    assert res.returncode == 0, f"README {lang} block failed:\n{code}\n--- stdout\n{res.stdout[-3000:]}\n" \
+                                f"--- stderr\n{res.stderr[-3000:]}"
+
+
+def _run_block_once(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: float, ports: Ports,
+                    saved_files: dict[Path, str]) -> subprocess.CompletedProcess:
+    original, code = code, shrink(code, ports)
     if lang in ("python", "py"):
         saved = re.search(r"[Ss]ave the class below as\s+`([\w./-]+\.py)`", before)
         if saved:
+            saved_files[cwd / saved.group(1)] = original
             (cwd / saved.group(1)).write_text(code)
         script = cwd / "_block.py"
         script.write_text(code)
@@ -154,9 +174,7 @@ def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: 
             os.killpg(proc.pid, signal.SIGKILL)
         except ProcessLookupError:
             pass
-    res = subprocess.CompletedProcess(cmd, proc.returncode, out, err)
-    assert res.returncode == 0, f"README {lang} block failed:\n{code}\n--- stdout\n{res.stdout[-3000:]}\n" \
-                                f"--- stderr\n{res.stderr[-3000:]}"
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
 def test_readme_blocks_are_all_runnable_kinds():
@@ -164,7 +182,7 @@ def test_readme_blocks_are_all_runnable_kinds():
     assert len(blocks) >= 5
     for lang, code, _ in blocks:
         assert lang in ("shell", "bash", "sh", "console", "python", "py"), lang
-        assert "..." not in shrink(code).replace('"..."', ""), f"placeholder in a README block:\n{code}"
+        assert "..." not in shrink(code, Ports()).replace('"..."', ""), f"placeholder in a README block:\n{code}"
 
 
 def test_readme_has_no_merge_leftovers():
@@ -191,5 +209,6 @@ def test_every_readme_block_runs_as_written(tmp_path):
     # `python benchmarks/X.py OUT` lines run this checkout's scripts; their JSON lands in the temp copy.
     shutil.copytree(ROOT / "benchmarks", tmp_path / "benchmarks", ignore=shutil.ignore_patterns("results"))
     (tmp_path / "benchmarks" / "results").mkdir()
+    ports, saved_files = Ports(), {}
     for lang, code, before in readme_blocks(README.read_text()):
-        run_block(lang, code, before, tmp_path, env, timeout=1800)
+        run_block(lang, code, before, tmp_path, env, timeout=1800, ports=ports, saved_files=saved_files)

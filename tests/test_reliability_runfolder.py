@@ -138,34 +138,58 @@ def test_a_torn_or_unparsable_line_never_costs_complete_records(tiny_dataset, ti
     assert len({record_key(r) for r in read_records(out)}) == 8
 
 
-class SlowAgent:
-    """Takes ~2 s per episode, so a second process surely starts while the first one runs."""
+GATE = "OVON_TEST_GATE"
+
+
+class GatedAgent:
+    """Ten steps an episode; its first step waits for the file named by $OVON_TEST_GATE (at most 300 s),
+    after writing that name + ".waiting": the test knows this run is under way (its folder locked), and the
+    run lasts until the test lets it go, however slowly a loaded machine starts a second process."""
 
     privileged = False
+    released = False
 
     def reset(self, episode_info: dict) -> None:
         self.t = 0
 
     def act(self, observation: dict) -> int:
         self.t += 1
-        time.sleep(0.2)
+        gate = os.environ.get(GATE)
+        if gate and not GatedAgent.released:
+            Path(gate + ".waiting").touch()
+            deadline = time.monotonic() + 300
+            while not Path(gate).exists() and time.monotonic() < deadline:
+                time.sleep(0.05)
+            GatedAgent.released = True
         return 0 if self.t >= 10 else 2
+
+
+def _wait_for(condition, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.05)
 
 
 def test_two_evaluations_on_one_folder_do_not_both_write(tiny_dataset, tiny_scenes, tmp_path):
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "ovon.cli.main", "evaluate", "--agent", "tests.test_reliability_runfolder:SlowAgent",
+    cmd = [sys.executable, "-m", "ovon.cli.main", "evaluate", "--agent", "tests.test_reliability_runfolder:GatedAgent",
            "--data", str(tiny_dataset),
            "--scenes", str(tiny_scenes), "--splits", "val_seen", "--episodes", "6", "--workers", "1", "--no-progress",
            "--out", str(out)]
+    gate = tmp_path / "gate"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    first = subprocess.Popen(cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 120
-    while not (out / LOCK_FILE).exists() and time.time() < deadline and first.poll() is None:
-        time.sleep(0.2)
-    second = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
-    first.wait(timeout=300)
-    assert first.returncode == 0, first.stderr.read()
+    err = tmp_path / "first.err"  # a file, not a pipe: what the first run writes never blocks it
+    with open(err, "w") as first_err:
+        first = subprocess.Popen(cmd, env={**env, GATE: str(gate)}, cwd=ROOT, stdout=subprocess.DEVNULL,
+                                 stderr=first_err)
+    try:
+        _wait_for(lambda: Path(f"{gate}.waiting").exists() or first.poll() is not None, 300)
+        assert first.poll() is None and (out / LOCK_FILE).exists(), err.read_text()
+        second = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    finally:
+        gate.touch()  # the first run goes on to its end
+        first.wait(timeout=300)
+    assert first.returncode == 0, err.read_text()
     assert second.returncode == 2 and "in use by another ovon process" in second.stderr
     assert len(second.stderr.strip().splitlines()) == 1
     keys = [record_key(r) for r in read_records(out)]

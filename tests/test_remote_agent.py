@@ -1,16 +1,17 @@
 """`ovon serve` + `ovon evaluate --agent remote:HOST:PORT`: byte-identical results to the same agent
 in-process (random, an oracle reading the privileged channel, VLFM), batching over workers and streams,
 one-line errors, and a server that dies or hangs mid-run, then a re-run that resumes. Servers listen on
-loopback, on free ports, and are always stopped."""
+loopback, on ports they picked themselves (port 0) unless a test needs a given one, and are always stopped."""
 
 from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import signal
-import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from contextlib import contextmanager
@@ -24,7 +25,7 @@ from ovon.agents.served import servable_factory
 from ovon.cli.main import main as ovon
 from ovon.evaluate.harness import EvalConfig, evaluate
 from ovon.evaluate.results import read_records
-from tests.remote_agents import BatchedRandom, serving
+from tests.remote_agents import BatchedRandom, free_ports, serving
 
 ROOT = Path(__file__).resolve().parents[1]
 OUTPUTS = ("episodes.jsonl", "summary.json")
@@ -41,34 +42,43 @@ def same_files(a: Path, b: Path) -> None:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @contextmanager
-def serve_process(*args: str, env: dict | None = None):
-    """`ovon serve ARGS` in its own process (the repository root as working directory); killed on exit."""
-    cmd = [sys.executable, "-m", "ovon.cli.main", "serve", *args]
-    proc = subprocess.Popen(
-        cmd,
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-        env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})},
-        start_new_session=True,
-    )
-    try:
-        line = proc.stdout.readline()
-        assert "remote:127.0.0.1:" in line, line
-        yield proc
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
-        proc.stdout.close()
+def serve_process(*args: str, port: int = 0, env: dict | None = None, retry_s: float = 30.0):
+    """`ovon serve ARGS --port PORT` in its own process (the repository root as working directory), killed on
+    exit; yields the port it listens on, read from the line it prints. Port 0 (the default): the server binds
+    a free port itself, so no other process can take it between the pick and the bind. A given port (a re-run
+    that must find the server at the address in the run's identity) that is in use is tried again for
+    `retry_s`: what holds it may be passing (another test probing for a free port)."""
+    cmd = [sys.executable, "-m", "ovon.cli.main", "serve", *args, "--port", str(port)]
+    deadline = time.monotonic() + retry_s
+    while True:
+        with tempfile.TemporaryFile("w+") as err:  # a file, not a pipe: the server's log never blocks it
+            proc = subprocess.Popen(
+                cmd,
+                cwd=ROOT,
+                stdout=subprocess.PIPE,
+                stderr=err,
+                text=True,
+                env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})},
+                start_new_session=True,
+            )
+            try:
+                line = proc.stdout.readline()
+                bound = re.search(r"remote:127\.0\.0\.1:(\d+)", line)
+                if bound:
+                    yield int(bound.group(1))
+                    return
+                proc.wait()
+                err.seek(0)
+                why = err.read()
+                if not (port and "Address already in use" in why and time.monotonic() < deadline):
+                    raise AssertionError(f"`ovon serve` did not start: {line!r}\n{why[-3000:]}")
+            finally:
+                if proc.poll() is None:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+                proc.stdout.close()
+        time.sleep(0.5)
 
 
 def test_served_random_agent_gives_byte_identical_files(tiny_dataset, tiny_scenes, tmp_path):
@@ -130,18 +140,17 @@ def test_the_privileged_channel_travels_only_when_the_run_allows_oracles(tiny_da
 def test_a_server_that_dies_is_one_line_and_the_rerun_resumes(tiny_dataset, tiny_scenes, tmp_path):
     cfg = cfg_for(tiny_dataset, tiny_scenes, "random", chunk=1)
     evaluate(cfg, tmp_path / "local", progress=False)
-    port = free_port()
-    remote = dataclasses.replace(cfg, agent=f"remote:127.0.0.1:{port}")
     out = tmp_path / "remote"
-    serve = ("tests.remote_agents:DieAt", "--name", "random", "--port", str(port))
-    with serve_process(*serve, env={"OVON_TEST_DIE_AT": "3"}):
+    serve = ("tests.remote_agents:DieAt", "--name", "random")
+    with serve_process(*serve, env={"OVON_TEST_DIE_AT": "3"}) as port:
+        remote = dataclasses.replace(cfg, agent=f"remote:127.0.0.1:{port}")
         with pytest.raises(RemoteError) as e:
             evaluate(remote, out, progress=False)
     msg = str(e.value)
     assert f"tcp://127.0.0.1:{port} closed the connection" in msg and "step 1 of episode val_" in msg
     assert "re-run the same command to resume" in msg and "\n" not in msg
     assert len(read_records(out)) == 2  # the episodes finished before the crash are kept
-    with serve_process(*serve):
+    with serve_process(*serve, port=port):  # the same address: the run's identity holds it
         evaluate(remote, out, progress=False)
     same_files(tmp_path / "local", out)
 
@@ -171,7 +180,7 @@ def test_a_hung_agent_times_out_with_the_episode_named(tiny_dataset, tiny_scenes
 
 
 def test_command_line_refusals_are_one_line(tiny_dataset, tiny_scenes, tmp_path, capsys):
-    port = free_port()
+    [port] = free_ports(1)  # nothing listens there
     data = ["--data", str(tiny_dataset), "--scenes", str(tiny_scenes), "--out", str(tmp_path / "x")]
     cases = [
         (["evaluate", "--agent", "remote:localhost", *data], "is not remote:HOST:PORT"),
