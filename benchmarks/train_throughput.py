@@ -1,6 +1,6 @@
 """Training throughput per algorithm: environment steps/s and time of one train step.
 
-Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,dagger,dagger-overlap,ppo] [--updates 4]
+Usage: python benchmarks/train_throughput.py [--preset cpu-small] [--algos bc,dagger,dagger-bf16,ppo] [--updates 4]
        [--workers 2] [--houses 0,1] [--text hash|real] [--out benchmarks/results/train_throughput.json]
        [--baseline-rev REV --repeats 2 --warmup 1] [--set KEY=VALUE ...]
 
@@ -16,8 +16,10 @@ compiles its numba kernels in its first run, which would otherwise count as the 
 both trees; a knob that changes the learning shows as `same_learning_as_baseline: false` only against
 a baseline run without it.
 
-`dagger-overlap` is DAgger with `dagger.overlap=true` (learning while the next rollout runs); against
-REV it is compared with REV's plain DAgger. Each online algorithm (DAgger with the configured expert,
+A suffix names a variant that learns differently by design: `-overlap` sets `dagger.overlap=true`
+(learning while the next rollout runs), `-bf16` sets `learn_dtype=bfloat16` (DAgger's forward and
+backward under bfloat16 autocast); they combine (`dagger-bf16-overlap`). Against REV a variant is compared
+with REV's plain algorithm. Each online algorithm (DAgger with the configured expert,
 PPO) runs `--updates` updates of the preset on
 ad-hoc episodes in procedural houses, envs in `--workers` processes; the first update (world loading,
 numba compilation) is reported apart. Reported: env steps/s over whole updates (rollout + learning),
@@ -62,16 +64,33 @@ def _stats(rows: list[dict], key: str) -> float | None:
     return float(np.median(vals)) if vals else None
 
 
+VARIANTS = {
+    "overlap": lambda cfg: dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=True)),
+    "bf16": lambda cfg: dataclasses.replace(cfg, learn_dtype="bfloat16"),
+}
+
+
+def split_variants(name: str) -> tuple[str, list[str]]:
+    """"dagger-bf16-overlap" -> ("dagger", ["bf16", "overlap"]); an unknown suffix is an error."""
+    base, *variants = name.split("-")
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad:
+        raise SystemExit(f"--algos: unknown variant {bad[0]!r} in {name!r}; valid suffixes: "
+                         f"{', '.join('-' + v for v in VARIANTS)}")
+    return base, variants
+
+
 def bench_online(algo: str, cfg, specs, root: Path) -> dict:
-    """`algo` is dagger, ppo or dagger-overlap (DAgger learning while the next rollout runs)."""
+    """`algo` is dagger or ppo, optionally with variant suffixes (`VARIANTS`)."""
     from ovon.train import train
 
     out = root / algo
-    if algo == "dagger-overlap":
-        cfg = dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=True))
+    base, variants = split_variants(algo)
+    for v in variants:
+        cfg = VARIANTS[v](cfg)
     t0, c0 = time.perf_counter(), _tree_cpu()
     with _SteadyCPU() as marks:
-        train(dataclasses.replace(cfg, algo=algo.removesuffix("-overlap")), specs, out)
+        train(dataclasses.replace(cfg, algo=base), specs, out)
     wall, cpu = time.perf_counter() - t0, _tree_cpu() - c0
     rows = read_metrics(out)
     steady = rows[1:] or rows
@@ -172,7 +191,7 @@ def compare(args) -> None:
     tmp = Path(tempfile.mkdtemp(prefix="ovon-bench-rev-"))
     base, own = baseline_tree(here, args.baseline_rev, tmp)
     algos = [a for a in args.algos.split(",") if a]
-    base_algos = ",".join(dict.fromkeys(a.removesuffix("-overlap") for a in algos))  # REV has no overlap
+    base_algos = ",".join(dict.fromkeys(split_variants(a)[0] for a in algos))  # REV runs the plain algorithms
     passthrough = ["--preset", args.preset, "--updates", str(args.updates),
                    "--workers", str(args.workers), "--houses", args.houses, "--expert", args.expert,
                    "--text", args.text, "--bc-episodes", str(args.bc_episodes)]
@@ -216,7 +235,7 @@ def compare(args) -> None:
                      "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {},
                      "runs": runs}
     for algo in [a for a in algos if a != "bc"]:
-        key = {"current": algo, "baseline": algo.removesuffix("-overlap")}  # a variant vs REV's plain algo
+        key = {"current": algo, "baseline": split_variants(algo)[0]}  # a variant vs REV's plain algo
         med = {n: float(np.median([r["algos"][key[n]]["env_steps_per_s"] for r in rs])) for n, rs in runs.items()}
         rollout = {n: float(np.median([r["algos"][key[n]]["rollout_steps_per_s"] for r in rs]))
                    for n, rs in runs.items()}
@@ -235,7 +254,7 @@ def compare(args) -> None:
                                   # acting and learning leave the env workers' cores idle)
                                   "cpu_bound_steps_per_s": {n: 1000.0 * max(cores, 1) / v for n, v in steady.items()}}
         entry = summary["algos"][algo]
-        if algo == key["baseline"]:  # a variant (dagger-overlap) learns differently by design
+        if algo == key["baseline"]:  # a variant (dagger-overlap, dagger-bf16) learns differently by design
             learned = [r["algos"][algo].get("learning") for rs in runs.values() for r in rs]
             entry["same_learning_as_baseline"] = all(x is not None and x == learned[0] for x in learned)
         print(f"{algo}: {med['baseline']:.0f} -> {med['current']:.0f} env steps/s including learning "
@@ -296,6 +315,10 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=1, help="with --baseline-rev: one untimed 1-update run per tree "
                     "first (numba compiles into a fresh worktree's cache), 0 = none")
     args = ap.parse_args()
+    for name in [a for a in args.algos.split(",") if a and a != "bc"]:  # refuse a typo before any work
+        base, _ = split_variants(name)
+        if base not in ("dagger", "ppo"):
+            raise SystemExit(f"--algos: unknown algorithm {base!r} in {name!r}; valid: bc, dagger, ppo (+ suffixes)")
     if args.baseline_rev:
         compare(args)
         return

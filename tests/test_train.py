@@ -89,8 +89,62 @@ def test_bc_resume_reproduces_losses(tmp_path: Path) -> None:
         assert torch.equal(x, y)
 
 
+def test_bc_in_bfloat16_learns_what_float32_learns(tmp_path: Path) -> None:
+    """`learn_dtype=bfloat16`: the forward/backward under autocast (other low bits than float32), the
+    weights float32, and the synthetic rule learned as well."""
+    from ovon.models.policy import ActorCritic
+    from ovon.train import train
+
+    shards = write_synthetic_shards(tmp_path / "shards")
+    cfg = train_preset("tiny", algo="bc", max_updates=60, checkpoint_every=60)
+    cfg = dataclasses.replace(cfg, bc=dataclasses.replace(cfg.bc, shards=str(shards), batch_chunks=3))
+    train(cfg, None, tmp_path / "fp32")
+    train(dataclasses.replace(cfg, learn_dtype="bfloat16"), None, tmp_path / "bf16")
+    a, b = _losses(tmp_path / "fp32"), _losses(tmp_path / "bf16")
+    assert a[0] != b[0] and a[0] == pytest.approx(b[0], rel=0.05)
+    assert np.mean(b[-10:]) < 0.6 * b[0] and np.mean(b[-10:]) == pytest.approx(np.mean(a[-10:]), rel=0.05)
+    policy = ActorCritic.load(tmp_path / "bf16" / "policy.pt")
+    assert all(p.dtype == torch.float32 for p in policy.parameters())
+
+
+@pytest.mark.parametrize("core", ["transformer", "lstm"])
+def test_bfloat16_forward_stays_close_to_float32(core: str) -> None:
+    """Under CPU autocast the transformer's attention runs in float32 (the bf16 backward is ~5x slower):
+    outputs then differ from float32 only by bfloat16 rounding, and gradients flow."""
+    from ovon.models.policy import build_policy
+
+    cfg = train_preset("tiny")
+    torch.manual_seed(0)
+    policy = build_policy(dataclasses.replace(cfg.policy, core=core), 20, 16, cfg.encoder)
+    obs = torch.randn(3, 10, 36)
+    prev = torch.zeros(3, 10, dtype=torch.long)
+    starts = torch.zeros(3, 10, dtype=torch.bool)
+    starts[:, [0, 6]] = True
+    ref, _ = policy(obs, prev, starts)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        low, values = policy(obs, prev, starts)
+    assert low.dtype == torch.bfloat16
+    assert torch.allclose(low.float(), ref, atol=0.05) and not torch.equal(low.float(), ref)
+    (low.float().sum() + values.float().sum()).backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in policy.parameters() if p.requires_grad
+               and p.grad is not None)
+
+
+def test_make_obs_widens_float16_embeddings_exactly() -> None:
+    """The buffer's float16 embeddings are widened inside the concatenation: the same numbers as
+    `.float()` first."""
+    from ovon.models.policy import ActorCritic
+
+    image = torch.randn(2, 5, 7).half()
+    goal = torch.randn(2, 3)
+    obs = ActorCritic.make_obs(image, goal)
+    assert obs.dtype == torch.float32
+    assert torch.equal(obs, torch.cat([image.float(), goal[:, None].expand(2, 5, 3)], -1))
+    assert ActorCritic.make_obs(image, goal.half()).dtype == torch.float32
+
+
 @pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-context", "dagger-overlap", "dagger-frontier",
-                                  "ppo"])
+                                  "dagger-bf16", "ppo"])
 def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
     """Envs replay their current episode, the acting memory, the DAgger buffer (with its chunks' context
     views) and every RNG are restored (with `dagger.overlap` also the acting copy and the learner's
@@ -113,6 +167,9 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
     if algo == "dagger-context":
         algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=2, grad_steps=2, sample_rollouts=2,
                                                         context_prefix=True)}
+    if algo == "dagger-bf16":  # autocast state is per thread and per process: a resume must re-enter it
+        algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2),
+                                 "learn_dtype": "bfloat16"}
     if algo == "dagger-overlap":
         algo, n, split = "dagger", 7, 3
         extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True),
@@ -130,6 +187,10 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
         on_policy = dataclasses.replace(cfg, dagger=dataclasses.replace(cfg.dagger, overlap=False))
         train(on_policy, house_specs, tmp_path / "on_policy")
         assert _losses(tmp_path / "on_policy") != a
+    if cfg.learn_dtype == "bfloat16":  # bfloat16 did run (other low bits), and learns the same thing
+        train(dataclasses.replace(cfg, learn_dtype="float32"), house_specs, tmp_path / "float32")
+        c = _losses(tmp_path / "float32")
+        assert c[0] != a[0] and c[0] == pytest.approx(a[0], rel=0.05)
 
 
 def test_atomic_checkpoint_leaves_no_temp(tmp_path: Path) -> None:
@@ -547,3 +608,19 @@ def test_cpu_small_features_end_to_end(tmp_path: Path, house_specs, table_path: 
     rec = run_episode(env, agent, house_specs[0], seed=0)
     env.close()
     assert 1 <= rec["steps"] <= cfg.task.max_steps
+
+
+def test_cli_trains_dagger_in_bfloat16_and_refuses_it_for_ppo(tmp_path: Path, capsys) -> None:
+    """`--set learn_dtype=bfloat16` from the command line: DAgger trains (the run's config records it, and no
+    torch warning reaches the user); PPO is refused in one line before anything is written."""
+    from ovon.cli.main import main
+
+    base = ["train", "--preset", "tiny", "--procedural", "0", "--episodes", "2", "--expert", "shortest-path",
+            "--set", "learn_dtype=bfloat16"]
+    assert main([*base, "--algo", "dagger", "--out", str(tmp_path / "dagger")]) == 0
+    assert json.loads((tmp_path / "dagger" / "config.json").read_text())["learn_dtype"] == "bfloat16"
+    assert "Mismatch dtype" not in capsys.readouterr().err
+    assert main([*base, "--algo", "ppo", "--out", str(tmp_path / "ppo")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "learn_dtype float32 for algo ppo" in err[0] and "fix:" in err[0]
+    assert not (tmp_path / "ppo").exists()

@@ -90,11 +90,17 @@ class ActorCritic(nn.Module):
     @staticmethod
     def make_obs(image_emb: torch.Tensor, goal_emb: torch.Tensor) -> torch.Tensor:
         """Concatenate image (..., Di) and goal (..., Dg) embeddings; the goal broadcasts over time
-        (e.g. image (B,T,Di) with goal (B,Dg))."""
+        (e.g. image (B,T,Di) with goal (B,Dg)). At least float32: float16 buffer embeddings are widened
+        inside the one copy the concatenation makes (a separate `.float()` first cost a second pass)."""
         while goal_emb.ndim < image_emb.ndim:
             goal_emb = goal_emb.unsqueeze(-2)
         goal_emb = goal_emb.expand(*image_emb.shape[:-1], goal_emb.shape[-1])
-        return torch.cat([image_emb, goal_emb.to(image_emb.dtype)], -1)
+        dtype = torch.promote_types(torch.promote_types(image_emb.dtype, goal_emb.dtype), torch.float32)
+        out = torch.empty(*image_emb.shape[:-1], image_emb.shape[-1] + goal_emb.shape[-1], dtype=dtype,
+                          device=image_emb.device)
+        out[..., : image_emb.shape[-1]] = image_emb
+        out[..., image_emb.shape[-1] :] = goal_emb
+        return out
 
     def encode_images(self, batch: Any) -> torch.Tensor:
         """Run the policy-owned trainable image encoder (only when `encoder_cfg.image == "cnn"`)."""
@@ -282,6 +288,14 @@ def build_policy(
     return cls(policy_cfg, image_dim, text_dim, encoder_cfg)
 
 
+def load_weights_file(path: str | Path, map_location: Any = "cpu") -> Any:
+    """`torch.load(weights_only=True)` without torch's own warnings: a foreign file that starts like a pickle
+    makes torch warn before it raises, and a caller's one-line refusal must be the only line."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return torch.load(path, map_location=map_location, weights_only=True)
+
+
 def read_policy_file(path: str | Path, flag: str = "policy", map_location: str | torch.device = "cpu") -> dict:
     """The dict of a policy.pt written by `ActorCritic.save` (a run folder means its policy.pt), read with
     weights_only. Anything else - a missing, empty, truncated or foreign file, a training run's
@@ -297,9 +311,7 @@ def read_policy_file(path: str | Path, flag: str = "policy", map_location: str |
     resume_state = (f"{where}: {p} is a training run's resume state, not a policy; fix: pass "
                     f"{p.parent / 'policy.pt'}")
     try:
-        with warnings.catch_warnings():  # a foreign file that starts like a pickle makes torch warn first
-            warnings.simplefilter("ignore")
-            ckpt = torch.load(p, map_location=map_location, weights_only=True)
+        ckpt = load_weights_file(p, map_location)
     except Exception as e:  # noqa: BLE001 - torch raises many types (unpickling, zip, EOF) for a bad file
         if p.name == "checkpoint.pt":
             raise ValueError(resume_state) from None

@@ -12,10 +12,11 @@ Images = torch.Tensor | dict[str, torch.Tensor]
 
 
 def features(policy, images: Images) -> torch.Tensor:
-    """Image embeddings for a batch with any leading dims: a tensor passes through; raw frames go
-    through the policy's trainable CNN (with gradients when called under grad)."""
+    """Image embeddings for a batch with any leading dims: a tensor passes through (float16 buffer
+    embeddings too: `make_obs` widens them as it concatenates); raw frames go through the policy's
+    trainable CNN (with gradients when called under grad)."""
     if isinstance(images, torch.Tensor):
-        return images.float()
+        return images
     rgb = images["rgb"]
     lead = rgb.shape[:-3]
     flat = {k: v.reshape(-1, *v.shape[len(lead):]) for k, v in images.items()}

@@ -234,8 +234,10 @@ def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | P
             lo = (k * W + info.rank) * B
             ids = perm[torch.arange(lo, lo + B) % n_chunks]
             b = make_batch(data, ids, dev)
-            obs = policy.make_obs(features(policy, b["image"]), b["goal"])
-            logits, values = model(obs, b["prev"], b["starts"])
+            with run.learning():
+                obs = policy.make_obs(features(policy, b["image"]), b["goal"])
+                logits, values = model(obs, b["prev"], b["starts"])
+            logits, values = logits.float(), values.float()
             m = b["mask"]
             target = torch.where(m, b["action"], torch.full_like(b["action"], -1))
             loss = imitation_loss(logits, target, cfg.stop_loss_weight) + 0.0 * values.sum()

@@ -169,6 +169,12 @@ class TrainConfig:
     # Imitation (BC, DAgger): weight of the STOP class in the cross-entropy. STOP is ~1% of the labels
     # but one missing STOP turns a found goal into a failure.
     stop_loss_weight: float = positive(1.0)
+    # Precision of BC's and DAgger's forward and backward passes (torch autocast; weights, optimiser, loss
+    # and acting stay float32). bfloat16 halved DAgger's update on this project's CPU (AVX512-BF16; the
+    # README's throughput table) with the same SR, and changes the learned low bits; a CPU without bf16
+    # instructions can be slower (`benchmarks/train_throughput.py --algos dagger,dagger-bf16` tells).
+    # PPO keeps float32: its importance ratio compares the update's log-probs with the acting ones.
+    learn_dtype: Literal["float32", "bfloat16"] = "float32"
     ppo: PPOConfig = field(default_factory=PPOConfig)
     finetune: FinetuneConfig = field(default_factory=FinetuneConfig)
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
@@ -190,6 +196,8 @@ class TrainConfig:
         # a PPO minibatch holds whole envs; BC and DAgger never read `ppo`
         rule(("algo", "ppo.minibatches", "num_envs"), lambda a, m, n: a != "ppo" or m <= n,
              "ppo.minibatches <= num_envs for algo ppo"),
+        rule(("learn_dtype", "algo"), lambda d, a: d == "float32" or a != "ppo",
+             "learn_dtype float32 for algo ppo (its ratio compares the update's log-probs with acting's)"),
         rule(("task.kind", "algo"), lambda k, a: k != "pointnav" or a == "ppo",
              "algo ppo for task.kind pointnav (there is no PointNav expert)"),
         rule(("task.kind", "encoder.image", "policy.goal_similarity"),

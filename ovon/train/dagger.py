@@ -85,11 +85,12 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 parts = [data[i] for i in picks + older.tolist()]
                 seqs = [with_context(p, P) for p in parts]  # (N, P + T, ...): context, then the chunk
                 img = map_images(cat_images([q["images"] for q in seqs]), lambda x: x.to(dev))
-                obs = policy.make_obs(features(policy, img), torch.cat([q["goals"] for q in seqs]).to(dev))
                 state0 = start_states(policy, parts, dev) if keep_state else None
-                logits, values = model(obs, torch.cat([q["prevs"] for q in seqs]).to(dev),
-                                       torch.cat([q["starts"] for q in seqs]).to(dev), state0)
-                logits, values = logits[:, P:], values[:, P:]  # no loss on the context
+                with run.learning():
+                    obs = policy.make_obs(features(policy, img), torch.cat([q["goals"] for q in seqs]).to(dev))
+                    logits, values = model(obs, torch.cat([q["prevs"] for q in seqs]).to(dev),
+                                           torch.cat([q["starts"] for q in seqs]).to(dev), state0)
+                logits, values = logits[:, P:].float(), values[:, P:].float()  # no loss on the context
                 target = torch.cat([p[4] for p in parts]).to(dev)
                 if g == 0:  # rows 0..num_envs: the newest rollout
                     with torch.no_grad():
@@ -244,5 +245,5 @@ def start_states(policy, entries: list[tuple], dev) -> tuple:
 
 def _compact(images: object) -> object:
     """Frozen-encoder embeddings are kept in float16 in the buffer (half the memory of a long DAgger
-    dataset); `features` turns them back into float32."""
+    dataset); `make_obs` widens them back to float32."""
     return images.half() if isinstance(images, torch.Tensor) and images.is_floating_point() else images

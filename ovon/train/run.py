@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -124,6 +125,18 @@ class TrainRun:
             finally:
                 torch.set_num_threads(self.learn_threads)
         else:
+            yield
+
+    @contextlib.contextmanager
+    def learning(self) -> Iterator[None]:
+        """The imitation learners' forward passes in `learn_dtype` (autocast; a no-op for float32)."""
+        if self.cfg.learn_dtype == "float32":
+            yield
+            return
+        # RMSNorm's float32 weight on a bfloat16 input takes torch's unfused path, which it warns about
+        # on every call: expected here, and not the user's to fix
+        warnings.filterwarnings("ignore", message="Mismatch dtype between input and weight", category=UserWarning)
+        with torch.autocast(self.device.type, dtype=torch.bfloat16):
             yield
 
     # -- resume / log / checkpoint -------------------------------------------------------------------

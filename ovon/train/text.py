@@ -60,10 +60,10 @@ def _read_cache(path: Path, warn: bool = True) -> dict | None:
     embeddings that the text encoder recomputes, so it is rebuilt instead of stopping the run."""
     import warnings
 
+    from ovon.models.policy import load_weights_file
+
     try:
-        with warnings.catch_warnings():  # torch's own pickle-protocol warning would precede ours
-            warnings.simplefilter("ignore")
-            data = torch.load(path, weights_only=True)
+        data = load_weights_file(path)  # quiet: torch's own pickle-protocol warning would precede ours
     except Exception as e:  # noqa: BLE001 - torch raises many types for a torn file
         data, why = None, type(e).__name__
     else:
