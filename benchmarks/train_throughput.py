@@ -70,14 +70,50 @@ VARIANTS = {
 }
 
 
+ALGOS = {"bc": (), "dagger": ("overlap", "bf16"), "ppo": ()}  # algorithm -> the variant suffixes it takes
+
+
 def split_variants(name: str) -> tuple[str, list[str]]:
-    """"dagger-bf16-overlap" -> ("dagger", ["bf16", "overlap"]); an unknown suffix is an error."""
+    """"dagger-bf16-overlap" -> ("dagger", ["bf16", "overlap"]); an unknown name or suffix is an error."""
     base, *variants = name.split("-")
-    bad = [v for v in variants if v not in VARIANTS]
+    if base not in ALGOS:
+        raise SystemExit(f"--algos: unknown algorithm {base!r} in {name!r}; valid: {', '.join(ALGOS)}")
+    bad = [v for v in variants if v not in ALGOS[base]]
     if bad:
-        raise SystemExit(f"--algos: unknown variant {bad[0]!r} in {name!r}; valid suffixes: "
-                         f"{', '.join('-' + v for v in VARIANTS)}")
+        takes = ", ".join("-" + v for v in ALGOS[base]) or "none"
+        raise SystemExit(f"--algos: {base} takes no variant {'-' + bad[0]!r} (in {name!r}); its suffixes: {takes}")
     return base, variants
+
+
+def base_config(args, root: Path):
+    """The preset with this run's options and `--set` overrides (every algorithm starts from it)."""
+    cfg = train_preset(args.preset, max_updates=args.updates, env_workers=args.workers, expert=args.expert,
+                       progress=False, checkpoint_every=10**9, text_cache=str(root / "text.pt"))
+    if args.envs:
+        cfg = dataclasses.replace(cfg, num_envs=args.envs)
+    if args.set:
+        from ovon.config.base import merge, parse_overrides
+
+        cfg = merge(cfg, parse_overrides(args.set))
+    return cfg
+
+
+def check_algos(args) -> None:
+    """Every `--algos` entry, with its variants and `--set`, is a valid training config: refused in one line
+    before any algorithm (or the baseline tree) has spent minutes."""
+    from ovon.config.base import ConfigError
+    from ovon.train import check_config
+
+    try:
+        cfg = base_config(args, Path(tempfile.gettempdir()))
+        for name in [a for a in args.algos.split(",") if a]:
+            base, variants = split_variants(name)
+            one = dataclasses.replace(cfg, algo=base)
+            for v in variants:
+                one = VARIANTS[v](one)
+            check_config(one)
+    except (ConfigError, ValueError, KeyError) as e:
+        raise SystemExit(f"train_throughput.py: {e}") from None
 
 
 def bench_online(algo: str, cfg, specs, root: Path) -> dict:
@@ -315,10 +351,7 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=1, help="with --baseline-rev: one untimed 1-update run per tree "
                     "first (numba compiles into a fresh worktree's cache), 0 = none")
     args = ap.parse_args()
-    for name in [a for a in args.algos.split(",") if a and a != "bc"]:  # refuse a typo before any work
-        base, _ = split_variants(name)
-        if base not in ("dagger", "ppo"):
-            raise SystemExit(f"--algos: unknown algorithm {base!r} in {name!r}; valid: bc, dagger, ppo (+ suffixes)")
+    check_algos(args)
     if args.baseline_rev:
         compare(args)
         return
@@ -326,14 +359,7 @@ def main() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     root = Path(tempfile.mkdtemp(prefix="ovon-train-bench-"))
     specs = adhoc_specs(parse_seed_list(args.houses))
-    cfg = train_preset(args.preset, max_updates=args.updates, env_workers=args.workers, expert=args.expert,
-                       progress=False, checkpoint_every=10**9, text_cache=str(root / "text.pt"))
-    if args.envs:
-        cfg = dataclasses.replace(cfg, num_envs=args.envs)
-    if args.set:
-        from ovon.config.base import merge, parse_overrides
-
-        cfg = merge(cfg, parse_overrides(args.set))
+    cfg = base_config(args, root)
     if args.text == "hash":
         texts = needed_texts(specs)
         write_text_table(root / "text.pt", {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(384)

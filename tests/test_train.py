@@ -141,10 +141,11 @@ def test_make_obs_widens_float16_embeddings_exactly() -> None:
     assert obs.dtype == torch.float32
     assert torch.equal(obs, torch.cat([image.float(), goal[:, None].expand(2, 5, 3)], -1))
     assert ActorCritic.make_obs(image, goal.half()).dtype == torch.float32
+    assert ActorCritic.make_obs(image.double(), goal).dtype == torch.float64  # other dtypes: the image's, as before
 
 
 @pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-context", "dagger-overlap", "dagger-frontier",
-                                  "dagger-bf16", "ppo"])
+                                  "dagger-bf16", "dagger-bf16-lstm-overlap", "ppo"])
 def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
     """Envs replay their current episode, the acting memory, the DAgger buffer (with its chunks' context
     views) and every RNG are restored (with `dagger.overlap` also the acting copy and the learner's
@@ -170,6 +171,15 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
     if algo == "dagger-bf16":  # autocast state is per thread and per process: a resume must re-enter it
         algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2),
                                  "learn_dtype": "bfloat16"}
+    if algo == "dagger-bf16-lstm-overlap":  # the learner thread enters autocast itself; the LSTM's kept (h, c)
+        from ovon.models.config import PolicyConfig
+
+        algo, n, split = "dagger", 7, 3
+        extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True,
+                                        context_prefix=True),
+                 "learn_dtype": "bfloat16", "checkpoint_every": 3,
+                 "policy": PolicyConfig(core="lstm", hidden=32, layers=1, heads=2, mlp=64, context=16,
+                                        prev_action_dim=8)}
     if algo == "dagger-overlap":
         algo, n, split = "dagger", 7, 3
         extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True),
@@ -624,3 +634,18 @@ def test_cli_trains_dagger_in_bfloat16_and_refuses_it_for_ppo(tmp_path: Path, ca
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "learn_dtype float32 for algo ppo" in err[0] and "fix:" in err[0]
     assert not (tmp_path / "ppo").exists()
+
+
+@pytest.mark.parametrize(("argv", "needle"), [
+    (["--algos", "ppo-bf16"], "ppo takes no variant '-bf16'"),
+    (["--algos", "bc-overlap"], "bc takes no variant '-overlap'"),
+    (["--algos", "dagerr"], "unknown algorithm 'dagerr'"),
+    (["--set", "learn_dtype=bfloat16"], "learn_dtype float32 for algo ppo"),  # the default algos include ppo
+])
+def test_train_throughput_refuses_a_bad_algorithm_before_any_work(tmp_path: Path, argv: list[str], needle: str) -> None:
+    out = tmp_path / "bench.json"
+    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "train_throughput.py"), *argv, "--out", str(out)],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode != 0 and len(lines) == 1 and needle in lines[0], res.stderr
+    assert not out.exists()

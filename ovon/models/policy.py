@@ -90,12 +90,12 @@ class ActorCritic(nn.Module):
     @staticmethod
     def make_obs(image_emb: torch.Tensor, goal_emb: torch.Tensor) -> torch.Tensor:
         """Concatenate image (..., Di) and goal (..., Dg) embeddings; the goal broadcasts over time
-        (e.g. image (B,T,Di) with goal (B,Dg)). At least float32: float16 buffer embeddings are widened
-        inside the one copy the concatenation makes (a separate `.float()` first cost a second pass)."""
+        (e.g. image (B,T,Di) with goal (B,Dg)), in the image's dtype; float16 / bfloat16 buffer embeddings
+        are widened to float32 inside the one copy the concatenation makes (a `.float()` first cost a pass)."""
         while goal_emb.ndim < image_emb.ndim:
             goal_emb = goal_emb.unsqueeze(-2)
         goal_emb = goal_emb.expand(*image_emb.shape[:-1], goal_emb.shape[-1])
-        dtype = torch.promote_types(torch.promote_types(image_emb.dtype, goal_emb.dtype), torch.float32)
+        dtype = torch.float32 if image_emb.dtype in (torch.float16, torch.bfloat16) else image_emb.dtype
         out = torch.empty(*image_emb.shape[:-1], image_emb.shape[-1] + goal_emb.shape[-1], dtype=dtype,
                           device=image_emb.device)
         out[..., : image_emb.shape[-1]] = image_emb

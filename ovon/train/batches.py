@@ -16,7 +16,7 @@ def features(policy, images: Images) -> torch.Tensor:
     embeddings too: `make_obs` widens them as it concatenates); raw frames go through the policy's
     trainable CNN (with gradients when called under grad)."""
     if isinstance(images, torch.Tensor):
-        return images
+        return images if images.dtype in (torch.float16, torch.bfloat16) else images.float()
     rgb = images["rgb"]
     lead = rgb.shape[:-3]
     flat = {k: v.reshape(-1, *v.shape[len(lead):]) for k, v in images.items()}

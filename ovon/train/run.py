@@ -133,9 +133,7 @@ class TrainRun:
         if self.cfg.learn_dtype == "float32":
             yield
             return
-        # RMSNorm's float32 weight on a bfloat16 input takes torch's unfused path, which it warns about
-        # on every call: expected here, and not the user's to fix
-        warnings.filterwarnings("ignore", message="Mismatch dtype between input and weight", category=UserWarning)
+        _quiet_rms_norm_dtype_warning()
         with torch.autocast(self.device.type, dtype=torch.bfloat16):
             yield
 
@@ -265,3 +263,14 @@ def param_checksum(module: torch.nn.Module) -> float:
     """Sum over parameters in float64: identical across DDP ranks when they stay in sync."""
     with torch.no_grad():
         return float(sum(p.detach().double().sum().item() for p in module.parameters()))
+
+
+_RMS_NORM_WARNING = "Mismatch dtype between input and weight"
+
+
+def _quiet_rms_norm_dtype_warning() -> None:
+    """RMSNorm's float32 weight on a bfloat16 input takes torch's unfused path, which torch warns about on
+    every call: expected under `learn_dtype=bfloat16`, not the user's to fix. Installed once per process
+    (installing a filter resets which once-per-place warnings were already shown)."""
+    if not any(f[1] is not None and f[1].pattern == _RMS_NORM_WARNING for f in warnings.filters):
+        warnings.filterwarnings("ignore", message=_RMS_NORM_WARNING, category=UserWarning)
