@@ -78,6 +78,11 @@ class LSTMCore(nn.Module):
     ) -> tuple[torch.Tensor, LSTMState]:
         """x (B,T,I) -> (B,T,H) and the final (h, c). The state is zeroed for an env at each of its
         episode starts (runs the LSTM segment by segment between start times)."""
+        if x.device.type == "cpu" and torch.is_autocast_enabled("cpu"):
+            # `learn_dtype=bfloat16` on a CPU: torch's bfloat16 LSTM gave results that depended on a thread
+            # running beside it (`dagger.overlap`'s acting), so a run did not repeat; float32 repeats exactly
+            with torch.autocast("cpu", enabled=False):
+                return self.forward(x.float(), episode_starts, state)
         b, t, _ = x.shape
         h, c = state if state is not None else self.init_state(b, x.device)
         if episode_starts is None:
