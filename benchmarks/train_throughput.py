@@ -70,7 +70,7 @@ VARIANTS = {
 }
 
 
-ALGOS = {"bc": (), "dagger": ("overlap", "bf16"), "ppo": ()}  # algorithm -> the variant suffixes it takes
+ALGOS = {"bc": (), "dagger": tuple(VARIANTS), "ppo": ()}  # algorithm -> the variant suffixes it takes
 
 
 def split_variants(name: str) -> tuple[str, list[str]]:
@@ -98,6 +98,15 @@ def base_config(args, root: Path):
     return cfg
 
 
+def config_for(cfg, name: str):
+    """The config an `--algos` entry trains: its algorithm, with its variants applied."""
+    base, variants = split_variants(name)
+    cfg = dataclasses.replace(cfg, algo=base)
+    for v in variants:
+        cfg = VARIANTS[v](cfg)
+    return cfg
+
+
 def check_algos(args) -> None:
     """Every `--algos` entry, with its variants and `--set`, is a valid training config: refused in one line
     before any algorithm (or the baseline tree) has spent minutes."""
@@ -107,11 +116,7 @@ def check_algos(args) -> None:
     try:
         cfg = base_config(args, Path(tempfile.gettempdir()))
         for name in [a for a in args.algos.split(",") if a]:
-            base, variants = split_variants(name)
-            one = dataclasses.replace(cfg, algo=base)
-            for v in variants:
-                one = VARIANTS[v](one)
-            check_config(one)
+            check_config(config_for(cfg, name))
     except (ConfigError, ValueError, KeyError) as e:
         raise SystemExit(f"train_throughput.py: {e}") from None
 
@@ -121,12 +126,9 @@ def bench_online(algo: str, cfg, specs, root: Path) -> dict:
     from ovon.train import train
 
     out = root / algo
-    base, variants = split_variants(algo)
-    for v in variants:
-        cfg = VARIANTS[v](cfg)
     t0, c0 = time.perf_counter(), _tree_cpu()
     with _SteadyCPU() as marks:
-        train(dataclasses.replace(cfg, algo=base), specs, out)
+        train(config_for(cfg, algo), specs, out)
     wall, cpu = time.perf_counter() - t0, _tree_cpu() - c0
     rows = read_metrics(out)
     steady = rows[1:] or rows

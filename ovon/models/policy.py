@@ -30,6 +30,10 @@ from ovon.models.transformer import TransformerCore
 CHECKPOINT_FORMAT = "ovon-policy-v1"
 
 
+# Storage dtypes of frozen-encoder embeddings that `make_obs` widens to float32 (the buffer keeps float16).
+NARROW_FLOATS = (torch.float16, torch.bfloat16)
+
+
 class ActorCritic(nn.Module):
     """Policy + value function; `forward` for training on chunks, `act_step`/`act` for online acting.
 
@@ -95,7 +99,7 @@ class ActorCritic(nn.Module):
         while goal_emb.ndim < image_emb.ndim:
             goal_emb = goal_emb.unsqueeze(-2)
         goal_emb = goal_emb.expand(*image_emb.shape[:-1], goal_emb.shape[-1])
-        dtype = torch.float32 if image_emb.dtype in (torch.float16, torch.bfloat16) else image_emb.dtype
+        dtype = torch.float32 if image_emb.dtype in NARROW_FLOATS else image_emb.dtype
         out = torch.empty(*image_emb.shape[:-1], image_emb.shape[-1] + goal_emb.shape[-1], dtype=dtype,
                           device=image_emb.device)
         out[..., : image_emb.shape[-1]] = image_emb

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from ovon.models.policy import NARROW_FLOATS
+
 # An image batch: precomputed embeddings (..., D) float, or raw frames {"rgb": (..., H, W, 3) uint8,
 # "depth": (..., H, W) float} for a trainable CNN that lives inside the policy.
 Images = torch.Tensor | dict[str, torch.Tensor]
@@ -16,7 +18,7 @@ def features(policy, images: Images) -> torch.Tensor:
     embeddings too: `make_obs` widens them as it concatenates); raw frames go through the policy's
     trainable CNN (with gradients when called under grad)."""
     if isinstance(images, torch.Tensor):
-        return images if images.dtype in (torch.float16, torch.bfloat16) else images.float()
+        return images if images.dtype in NARROW_FLOATS else images.float()
     rgb = images["rgb"]
     lead = rgb.shape[:-3]
     flat = {k: v.reshape(-1, *v.shape[len(lead):]) for k, v in images.items()}

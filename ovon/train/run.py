@@ -39,6 +39,8 @@ class TrainRun:
         if cfg.threads > 0:
             torch.set_num_threads(cfg.threads)
         self.learn_threads = torch.get_num_threads()
+        if cfg.learn_dtype == "bfloat16":
+            _quiet_rms_norm_dtype_warning()
         seed_everything(cfg.seed + 7919 * self.info.rank)
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)
@@ -133,7 +135,6 @@ class TrainRun:
         if self.cfg.learn_dtype == "float32":
             yield
             return
-        _quiet_rms_norm_dtype_warning()
         with torch.autocast(self.device.type, dtype=torch.bfloat16):
             yield
 
