@@ -27,7 +27,8 @@ test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow --durations=0
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check ovon tests benchmarks
+	$(VENV)/bin/ruff check ovon tests benchmarks clients experiments
+	$(VENV)/bin/ruff format --check ovon tests benchmarks clients experiments
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -104,8 +104,11 @@ def digest(recipe: EnvRecipe, workers: int, envs: int, steps: int, seed: int = 0
         obs, _ = vec.reset(seed=seed)
         for _ in range(steps):
             for k in sorted(obs):
-                h.update(k.encode() + np.ascontiguousarray(obs[k]).tobytes() if isinstance(obs[k], np.ndarray)
-                         else repr(obs[k]).encode())
+                h.update(
+                    k.encode() + np.ascontiguousarray(obs[k]).tobytes()
+                    if isinstance(obs[k], np.ndarray)
+                    else repr(obs[k]).encode()
+                )
             obs, rew, term, trunc, infos = vec.step(rng.integers(0, 4, size=envs))
             h.update(np.asarray(rew, np.float64).tobytes() + np.asarray(term).tobytes() + np.asarray(trunc).tobytes())
             for i, info in enumerate(infos.get("final_info", {}).get("metrics", {}).items()):
@@ -145,15 +148,32 @@ def _in_tree(tree: Path, args, what: str, row: str) -> dict:
     """Run `what` for `row` in a fresh process on the ovon of `tree` (this script, that tree's package)."""
     import subprocess
 
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--out", "-", "--scene", args.scene, "--steps",
-           str(args.steps), "--workers", str(args.workers), "--envs-per-worker", str(args.envs_per_worker),
-           "--check-steps", str(args.check_steps), "--child", what, "--child-row", row]
+    cmd = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--out",
+        "-",
+        "--scene",
+        args.scene,
+        "--steps",
+        str(args.steps),
+        "--workers",
+        str(args.workers),
+        "--envs-per-worker",
+        str(args.envs_per_worker),
+        "--check-steps",
+        str(args.check_steps),
+        "--child",
+        what,
+        "--child-row",
+        row,
+    ]
     env = {**os.environ, "PYTHONPATH": str(tree), "OVON_BENCH_TREE": str(tree)}
     res = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True)
     lines = [x for x in res.stdout.splitlines() if x.startswith("RESULT ")]
     if res.returncode != 0 or not lines:
         raise SystemExit(f"benchmark child failed in {tree} ({what}, {row}):\n{res.stderr[-2000:]}")
-    return json.loads(lines[-1][len("RESULT "):])
+    return json.loads(lines[-1][len("RESULT ") :])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -164,8 +184,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--envs-per-worker", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--rows", default="160x120,160x120-norgb,360x640")
-    ap.add_argument("--configs", default="in_process,gymnasium_async,ovon_vector",
-                    help="which of in_process, gymnasium_async, ovon_vector to measure")
+    ap.add_argument(
+        "--configs",
+        default="in_process,gymnasium_async,ovon_vector",
+        help="which of in_process, gymnasium_async, ovon_vector to measure",
+    )
     ap.add_argument("--baseline-rev", help="git revision, or the directory of a worktree of it, to compare against")
     ap.add_argument("--check-steps", type=int, default=300, help="untimed steps hashed to compare with the baseline")
     ap.add_argument("--out", required=True, help="JSON output path")
@@ -193,8 +216,10 @@ def main(argv: list[str] | None = None) -> int:
         if own:
             import subprocess
 
-            subprocess.run(["git", "-C", str(Path(__file__).resolve().parents[1]), "worktree", "remove", "--force",
-                            str(base_dir)], capture_output=True)
+            subprocess.run(
+                ["git", "-C", str(Path(__file__).resolve().parents[1]), "worktree", "remove", "--force", str(base_dir)],
+                capture_output=True,
+            )
         if tmp is not None:
             import shutil
 
@@ -212,11 +237,18 @@ def _run(args, configs: list[str], base_dir: Path | None, base_code: str | None)
         n = args.workers * args.envs_per_worker
         names = list(configs) + ([f"{c}_baseline" for c in configs if c != "gymnasium_async"] if base_dir else [])
         runs: dict[str, list[dict]] = {k: [] for k in names}
-        entry: dict = {"row": row, "width": cam.width, "height": cam.height, "rgb": cam.rgb, "workers": args.workers,
-                       "envs": n}
+        entry: dict = {
+            "row": row,
+            "width": cam.width,
+            "height": cam.height,
+            "rgb": cam.rgb,
+            "workers": args.workers,
+            "envs": n,
+        }
         if base_dir is not None:
-            digests = {t: _in_tree(d, args, "digest", row)["digest"] for t, d in (("current", here),
-                                                                                  ("baseline", base_dir))}
+            digests = {
+                t: _in_tree(d, args, "digest", row)["digest"] for t, d in (("current", here), ("baseline", base_dir))
+            }
             entry["digests"] = digests
             entry["same_as_baseline"] = digests["current"] == digests["baseline"]
         for _ in range(args.repeats):  # alternate, so slow phases of a shared machine hit all alike
@@ -232,8 +264,13 @@ def _run(args, configs: list[str], base_dir: Path | None, base_code: str | None)
                         runs[name].append(measure_throughput(recipe, workers=0, steps=args.steps // 2))
                     else:
                         runs[name].append(measure_throughput(recipe, workers=args.workers, envs=n, steps=args.steps))
-        med = {k: {m: statistics.median(r[m] for r in v) for m in ("steps_per_s", "cpu_ms_per_step",
-                                                                  "cpu_bound_steps_per_s")} for k, v in runs.items()}
+        med = {
+            k: {
+                m: statistics.median(r[m] for r in v)
+                for m in ("steps_per_s", "cpu_ms_per_step", "cpu_bound_steps_per_s")
+            }
+            for k, v in runs.items()
+        }
         entry.update(median=med, runs=runs)
         rate = {k: v["steps_per_s"] for k, v in med.items()}
         if "ovon_vector" in rate and "gymnasium_async" in rate:
@@ -243,8 +280,9 @@ def _run(args, configs: list[str], base_dir: Path | None, base_code: str | None)
         if base_dir is not None:
             both = [c for c in configs if f"{c}_baseline" in rate]
             entry["ratio_vs_baseline"] = {c: rate[c] / rate[f"{c}_baseline"] for c in both}
-            entry["cpu_ratio_vs_baseline"] = {c: med[f"{c}_baseline"]["cpu_ms_per_step"] / med[c]["cpu_ms_per_step"]
-                                              for c in both}
+            entry["cpu_ratio_vs_baseline"] = {
+                c: med[f"{c}_baseline"]["cpu_ms_per_step"] / med[c]["cpu_ms_per_step"] for c in both
+            }
         rows.append(entry)
         parts = [f"{k} {v:7.0f}" for k, v in rate.items()]
         extra = ""
@@ -256,11 +294,20 @@ def _run(args, configs: list[str], base_dir: Path | None, base_code: str | None)
             cpu = entry["cpu_ratio_vs_baseline"]
             vs = ", ".join(f"{c} x{r:.2f} (CPU per step x{cpu[c]:.2f})" for c, r in entry["ratio_vs_baseline"].items())
             print(f"{'':>16}  vs baseline: {vs}; same observations: {entry['same_as_baseline']}", flush=True)
-    result = {"scene": args.scene, "goal": goal, "steps": args.steps, "repeats": args.repeats,
-              "baseline": base_code,
-              "target_steps_per_s": TARGET, "cpus": os.cpu_count(), "machine": platform.platform(),
-              "time": time.strftime("%Y-%m-%dT%H:%M:%S"), "load_average_before": load_before,
-              "load_average_after": os.getloadavg(), "rows": rows}
+    result = {
+        "scene": args.scene,
+        "goal": goal,
+        "steps": args.steps,
+        "repeats": args.repeats,
+        "baseline": base_code,
+        "target_steps_per_s": TARGET,
+        "cpus": os.cpu_count(),
+        "machine": platform.platform(),
+        "time": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        "load_average_before": load_before,
+        "load_average_after": os.getloadavg(),
+        "rows": rows,
+    }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=1))
     print(f"wrote {args.out}")

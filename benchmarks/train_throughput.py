@@ -74,7 +74,7 @@ ALGOS = {"bc": (), "dagger": tuple(VARIANTS), "ppo": ()}  # algorithm -> the var
 
 
 def split_variants(name: str) -> tuple[str, list[str]]:
-    """"dagger-bf16-overlap" -> ("dagger", ["bf16", "overlap"]); an unknown name or suffix is an error."""
+    """ "dagger-bf16-overlap" -> ("dagger", ["bf16", "overlap"]); an unknown name or suffix is an error."""
     base, *variants = name.split("-")
     if base not in ALGOS:
         raise SystemExit(f"--algos: unknown algorithm {base!r} in {name!r}; valid: {', '.join(ALGOS)}")
@@ -87,8 +87,15 @@ def split_variants(name: str) -> tuple[str, list[str]]:
 
 def base_config(args, root: Path):
     """The preset with this run's options and `--set` overrides (every algorithm starts from it)."""
-    cfg = train_preset(args.preset, max_updates=args.updates, env_workers=args.workers, expert=args.expert,
-                       progress=False, checkpoint_every=10**9, text_cache=str(root / "text.pt"))
+    cfg = train_preset(
+        args.preset,
+        max_updates=args.updates,
+        env_workers=args.workers,
+        expert=args.expert,
+        progress=False,
+        checkpoint_every=10**9,
+        text_cache=str(root / "text.pt"),
+    )
     if args.envs:
         cfg = dataclasses.replace(cfg, num_envs=args.envs)
     if args.set:
@@ -196,8 +203,7 @@ def _tree_cpu() -> float:
 def _learning(rows: list[dict]) -> list[dict]:
     """Every logged number of every update except timings and rates: equal in two trees iff both
     trained the same (same losses, episodes, gradients), which a speed-up must not change."""
-    return [{k: v for k, v in r.items() if not k.startswith("time") and k not in ("steps_per_s", "time")}
-            for r in rows]
+    return [{k: v for k, v in r.items() if not k.startswith("time") and k not in ("steps_per_s", "time")} for r in rows]
 
 
 def bench_bc(cfg, specs, root: Path, episodes: int) -> dict:
@@ -214,10 +220,15 @@ def bench_bc(cfg, specs, root: Path, episodes: int) -> dict:
     bc = dataclasses.replace(cfg, algo="bc", bc=dataclasses.replace(cfg.bc, shards=str(shards)))
     train(bc, None, root / "bc")
     rows = read_metrics(root / "bc")
-    return {"record_episodes": episodes, "record_steps": steps, "record_steps_per_s": steps / rec,
-            "record_success": float(np.mean([r["success"] for r in res if "success" in r])),
-            "update_s": _stats(rows[1:] or rows, "time/update_s"), "batch_chunks": cfg.bc.batch_chunks,
-            "context": cfg.policy.context}
+    return {
+        "record_episodes": episodes,
+        "record_steps": steps,
+        "record_steps_per_s": steps / rec,
+        "record_success": float(np.mean([r["success"] for r in res if "success" in r])),
+        "update_s": _stats(rows[1:] or rows, "time/update_s"),
+        "batch_chunks": cfg.bc.batch_chunks,
+        "context": cfg.policy.context,
+    }
 
 
 def compare(args) -> None:
@@ -230,9 +241,22 @@ def compare(args) -> None:
     base, own = baseline_tree(here, args.baseline_rev, tmp)
     algos = [a for a in args.algos.split(",") if a]
     base_algos = ",".join(dict.fromkeys(split_variants(a)[0] for a in algos))  # REV runs the plain algorithms
-    passthrough = ["--preset", args.preset, "--updates", str(args.updates),
-                   "--workers", str(args.workers), "--houses", args.houses, "--expert", args.expert,
-                   "--text", args.text, "--bc-episodes", str(args.bc_episodes)]
+    passthrough = [
+        "--preset",
+        args.preset,
+        "--updates",
+        str(args.updates),
+        "--workers",
+        str(args.workers),
+        "--houses",
+        args.houses,
+        "--expert",
+        args.expert,
+        "--text",
+        args.text,
+        "--bc-episodes",
+        str(args.bc_episodes),
+    ]
     if args.envs:
         passthrough += ["--envs", str(args.envs)]
     for item in args.set:
@@ -242,65 +266,108 @@ def compare(args) -> None:
     try:
         if args.warmup:  # untimed: a fresh worktree compiles (and caches) every numba kernel in its first run
             i = passthrough.index("--updates")
-            warm = [*passthrough[:i], "--updates", "1", *passthrough[i + 2:]]
+            warm = [*passthrough[:i], "--updates", "1", *passthrough[i + 2 :]]
             for name, root in (("baseline", base), ("current", here)):
                 algos_of = base_algos if name == "baseline" else args.algos
-                subprocess.run([sys.executable, str(Path(__file__).resolve()), *warm, "--algos", algos_of,
-                                "--out", str(tmp / f"warm-{name}.json")], cwd=root, check=True, capture_output=True,
-                               env={**os.environ, "PYTHONPATH": str(root), "OVON_BENCH_TREE": str(root)})
+                subprocess.run(
+                    [
+                        sys.executable,
+                        str(Path(__file__).resolve()),
+                        *warm,
+                        "--algos",
+                        algos_of,
+                        "--out",
+                        str(tmp / f"warm-{name}.json"),
+                    ],
+                    cwd=root,
+                    check=True,
+                    capture_output=True,
+                    env={**os.environ, "PYTHONPATH": str(root), "OVON_BENCH_TREE": str(root)},
+                )
         for rep in range(args.repeats):
             for name, root in (("baseline", base), ("current", here)):
                 out = tmp / f"{name}{rep}.json"
                 before = resource.getrusage(resource.RUSAGE_CHILDREN)
-                subprocess.run([sys.executable, str(Path(__file__).resolve()), *passthrough,
-                                "--algos", base_algos if name == "baseline" else args.algos, "--out", str(out)],
-                               cwd=root, check=True,
-                               env={**os.environ, "PYTHONPATH": str(root), "OVON_BENCH_TREE": str(root)})
+                subprocess.run(
+                    [
+                        sys.executable,
+                        str(Path(__file__).resolve()),
+                        *passthrough,
+                        "--algos",
+                        base_algos if name == "baseline" else args.algos,
+                        "--out",
+                        str(out),
+                    ],
+                    cwd=root,
+                    check=True,
+                    env={**os.environ, "PYTHONPATH": str(root), "OVON_BENCH_TREE": str(root)},
+                )
                 after = resource.getrusage(resource.RUSAGE_CHILDREN)
                 r = json.loads(out.read_text())
                 r["cpu_s"] = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
                 runs[name].append(r)
-                print(name, rep, {a: round(v.get("env_steps_per_s") or 0, 1) for a, v in r["algos"].items()},
-                      flush=True)
+                print(
+                    name, rep, {a: round(v.get("env_steps_per_s") or 0, 1) for a, v in r["algos"].items()}, flush=True
+                )
     finally:
         if own:
             subprocess.run(["git", "-C", str(here), "worktree", "remove", "--force", str(base)], capture_output=True)
         shutil.rmtree(tmp, ignore_errors=True)
     rev = tree_commit(base) if Path(args.baseline_rev).is_dir() else args.baseline_rev
-    summary: dict = {"baseline_rev": rev, "set": args.set, "repeats": args.repeats, "preset": args.preset,
-                     "houses": args.houses, "updates": args.updates, "load_average": os.getloadavg(),
-                     "warmup": args.warmup, "load_average_before": load_before,
-                     "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {},
-                     "runs": runs}
+    summary: dict = {
+        "baseline_rev": rev,
+        "set": args.set,
+        "repeats": args.repeats,
+        "preset": args.preset,
+        "houses": args.houses,
+        "updates": args.updates,
+        "load_average": os.getloadavg(),
+        "warmup": args.warmup,
+        "load_average_before": load_before,
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
+        "algos": {},
+        "runs": runs,
+    }
     for algo in [a for a in algos if a != "bc"]:
         key = {"current": algo, "baseline": split_variants(algo)[0]}  # a variant vs REV's plain algo
         med = {n: float(np.median([r["algos"][key[n]]["env_steps_per_s"] for r in rs])) for n, rs in runs.items()}
-        rollout = {n: float(np.median([r["algos"][key[n]]["rollout_steps_per_s"] for r in rs]))
-                   for n, rs in runs.items()}
-        cpu = {n: float(np.median([r["algos"][key[n]].get("cpu_ms_per_step", np.nan) for r in rs]))
-               for n, rs in runs.items()}
-        steady = {n: float(np.median([r["algos"][key[n]].get("steady_cpu_ms_per_step") or np.nan for r in rs]))
-                  for n, rs in runs.items()}
+        rollout = {
+            n: float(np.median([r["algos"][key[n]]["rollout_steps_per_s"] for r in rs])) for n, rs in runs.items()
+        }
+        cpu = {
+            n: float(np.median([r["algos"][key[n]].get("cpu_ms_per_step", np.nan) for r in rs]))
+            for n, rs in runs.items()
+        }
+        steady = {
+            n: float(np.median([r["algos"][key[n]].get("steady_cpu_ms_per_step") or np.nan for r in rs]))
+            for n, rs in runs.items()
+        }
         cores = min(args.workers, os.cpu_count() or 1) if args.workers > 0 else 1
-        summary["algos"][algo] = {"env_steps_per_s": med, "rollout_steps_per_s": rollout,
-                                  "ratio": med["current"] / med["baseline"],
-                                  "rollout_ratio": rollout["current"] / rollout["baseline"],
-                                  "cpu_ms_per_step": cpu, "cpu_ratio": cpu["baseline"] / cpu["current"],
-                                  "steady_cpu_ms_per_step": steady,
-                                  "steady_cpu_ratio": steady["baseline"] / steady["current"],
-                                  # the rate with `cores` idle cores kept busy all the time (an upper bound:
-                                  # acting and learning leave the env workers' cores idle)
-                                  "cpu_bound_steps_per_s": {n: 1000.0 * max(cores, 1) / v for n, v in steady.items()}}
+        summary["algos"][algo] = {
+            "env_steps_per_s": med,
+            "rollout_steps_per_s": rollout,
+            "ratio": med["current"] / med["baseline"],
+            "rollout_ratio": rollout["current"] / rollout["baseline"],
+            "cpu_ms_per_step": cpu,
+            "cpu_ratio": cpu["baseline"] / cpu["current"],
+            "steady_cpu_ms_per_step": steady,
+            "steady_cpu_ratio": steady["baseline"] / steady["current"],
+            # the rate with `cores` idle cores kept busy all the time (an upper bound:
+            # acting and learning leave the env workers' cores idle)
+            "cpu_bound_steps_per_s": {n: 1000.0 * max(cores, 1) / v for n, v in steady.items()},
+        }
         entry = summary["algos"][algo]
         if algo == key["baseline"]:  # a variant (dagger-overlap, dagger-bf16) learns differently by design
             learned = [r["algos"][algo].get("learning") for rs in runs.values() for r in rs]
             entry["same_learning_as_baseline"] = all(x is not None and x == learned[0] for x in learned)
-        print(f"{algo}: {med['baseline']:.0f} -> {med['current']:.0f} env steps/s including learning "
-              f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}; CPU per step (set-up included) "
-              f"{cpu['baseline']:.2f} -> {cpu['current']:.2f} ms (x{entry['cpu_ratio']:.2f}), steady "
-              f"{steady['baseline']:.2f} -> {steady['current']:.2f} ms (x{entry['steady_cpu_ratio']:.2f}, CPU-bound "
-              f"{entry['cpu_bound_steps_per_s']['current']:.0f} steps/s); same losses and episodes "
-              f"as the baseline: {entry.get('same_learning_as_baseline', 'n/a')}")
+        print(
+            f"{algo}: {med['baseline']:.0f} -> {med['current']:.0f} env steps/s including learning "
+            f"(x{entry['ratio']:.2f}); rollout only x{entry['rollout_ratio']:.2f}; CPU per step (set-up included) "
+            f"{cpu['baseline']:.2f} -> {cpu['current']:.2f} ms (x{entry['cpu_ratio']:.2f}), steady "
+            f"{steady['baseline']:.2f} -> {steady['current']:.2f} ms (x{entry['steady_cpu_ratio']:.2f}, CPU-bound "
+            f"{entry['cpu_bound_steps_per_s']['current']:.0f} steps/s); same losses and episodes "
+            f"as the baseline: {entry.get('same_learning_as_baseline', 'n/a')}"
+        )
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(summary, indent=1))
     print(f"wrote {args.out}")
@@ -315,8 +382,16 @@ def tree_commit(tree: Path) -> str:
         return subprocess.run(["git", "-C", str(tree), *a], capture_output=True, text=True).stdout.strip()
 
     head = git("rev-parse", "--short=12", "HEAD") or "unknown"
-    changed = git("status", "--porcelain", "--untracked-files=no", "--", "ovon", "benchmarks", "pyproject.toml",
-                  ":!benchmarks/results")
+    changed = git(
+        "status",
+        "--porcelain",
+        "--untracked-files=no",
+        "--",
+        "ovon",
+        "benchmarks",
+        "pyproject.toml",
+        ":!benchmarks/results",
+    )
     return head + ("+dirty" if changed else "")
 
 
@@ -328,8 +403,9 @@ def baseline_tree(here: Path, rev: str, tmp: Path) -> tuple[Path, bool]:
     if Path(rev).is_dir():
         return Path(rev).resolve(), False
     base = tmp / "baseline"
-    subprocess.run(["git", "-C", str(here), "worktree", "add", "--detach", str(base), rev],
-                   check=True, capture_output=True)
+    subprocess.run(
+        ["git", "-C", str(here), "worktree", "add", "--detach", str(base), rev], check=True, capture_output=True
+    )
     return base, True
 
 
@@ -345,13 +421,26 @@ def main() -> None:
     ap.add_argument("--text", default="hash", choices=["hash", "real"])
     ap.add_argument("--bc-episodes", type=int, default=8)
     ap.add_argument("--out", default="benchmarks/results/train_throughput.json")
-    ap.add_argument("--baseline-rev", help="git revision, or the directory of a worktree of it, to compare against "
-                    "(alternating runs, fresh processes)")
+    ap.add_argument(
+        "--baseline-rev",
+        help="git revision, or the directory of a worktree of it, to compare against "
+        "(alternating runs, fresh processes)",
+    )
     ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="config override (as `ovon train --set`), repeatable")
-    ap.add_argument("--warmup", type=int, default=1, help="with --baseline-rev: one untimed 1-update run per tree "
-                    "first (numba compiles into a fresh worktree's cache), 0 = none")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="config override (as `ovon train --set`), repeatable",
+    )
+    ap.add_argument(
+        "--warmup",
+        type=int,
+        default=1,
+        help="with --baseline-rev: one untimed 1-update run per tree "
+        "first (numba compiles into a fresh worktree's cache), 0 = none",
+    )
     args = ap.parse_args()
     check_algos(args)
     if args.baseline_rev:
@@ -364,16 +453,28 @@ def main() -> None:
     cfg = base_config(args, root)
     if args.text == "hash":
         texts = needed_texts(specs)
-        write_text_table(root / "text.pt", {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(384)
-                                            for t in texts}, cfg.encoder)
+        write_text_table(
+            root / "text.pt",
+            {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(384) for t in texts},
+            cfg.encoder,
+        )
     import ovon
 
-    result = {"code": tree_commit(Path(ovon.__file__).resolve().parents[1]),
-              "preset": args.preset, "num_envs": cfg.num_envs, "env_workers": cfg.env_workers,
-              "rollout_steps": cfg.rollout_steps, "camera": [cfg.sim.camera.width, cfg.sim.camera.height],
-              "policy": dataclasses.asdict(cfg.policy), "encoder": cfg.encoder.image, "expert": args.expert,
-              "houses": args.houses, "set": args.set,
-              "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}, "algos": {}}
+    result = {
+        "code": tree_commit(Path(ovon.__file__).resolve().parents[1]),
+        "preset": args.preset,
+        "num_envs": cfg.num_envs,
+        "env_workers": cfg.env_workers,
+        "rollout_steps": cfg.rollout_steps,
+        "camera": [cfg.sim.camera.width, cfg.sim.camera.height],
+        "policy": dataclasses.asdict(cfg.policy),
+        "encoder": cfg.encoder.image,
+        "expert": args.expert,
+        "houses": args.houses,
+        "set": args.set,
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform()},
+        "algos": {},
+    }
     try:
         for algo in [a for a in args.algos.split(",") if a]:
             t = time.perf_counter()

@@ -37,8 +37,15 @@ PHASES = ("maps", "detect", "value", "decide")
 
 def run(env, agent, spec: EpisodeSpec, seed: int, max_steps: int) -> tuple[list[list[float]], dict]:
     obs, _ = env.reset(seed=seed, options={"episode": spec})
-    agent.reset({"episode_id": spec.episode_id, "seed": seed, "goal": spec.goal_category,
-                 "camera": vars(env.sim_cfg.camera), "embodiment": vars(env.sim_cfg.agent)})
+    agent.reset(
+        {
+            "episode_id": spec.episode_id,
+            "seed": seed,
+            "goal": spec.goal_category,
+            "camera": vars(env.sim_cfg.camera),
+            "embodiment": vars(env.sim_cfg.agent),
+        }
+    )
     rows = []
     info: dict = {}
     for _ in range(max_steps):
@@ -69,8 +76,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     houses = [s for s in args.houses.split(",") if s]
     if args.episodes < 1 or len(houses) * args.episodes < 2:
-        ap.error(f"--houses {args.houses!r} x --episodes {args.episodes}: expected at least 2 episodes in all "
-                 "(the first one is a warm-up and not timed); fix: raise --episodes")
+        ap.error(
+            f"--houses {args.houses!r} x --episodes {args.episodes}: expected at least 2 episodes in all "
+            "(the first one is a warm-up and not timed); fix: raise --episodes"
+        )
     import torch
 
     torch.set_num_threads(1)
@@ -101,29 +110,42 @@ def main(argv: list[str] | None = None) -> int:
             first = False
             v = np.array([r[0] for r in results["vlfm"][0]])
             f = np.array([r[0] for r in results["frontier"][0]])
-            print(f"house {h} {goal!r:>22}: vlfm {len(v):3d} steps {np.median(v):6.2f} ms, frontier {len(f):3d} "
-                  f"steps {np.median(f):6.2f} ms", flush=True)
+            print(
+                f"house {h} {goal!r:>22}: vlfm {len(v):3d} steps {np.median(v):6.2f} ms, frontier {len(f):3d} "
+                f"steps {np.median(f):6.2f} ms",
+                flush=True,
+            )
         env.close()
-    out: dict = {"benchmark": "VLFM agent act() per step vs the frontier expert, CPU camera 160x120",
-                 "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                             "python": sys.version.split()[0]},
-                 "camera": vars(sim.camera), "agents": {}}
+    out: dict = {
+        "benchmark": "VLFM agent act() per step vs the frontier expert, CPU camera 160x120",
+        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": sys.version.split()[0]},
+        "camera": vars(sim.camera),
+        "agents": {},
+    }
     for k, r in rows.items():
         a = np.array(r)
-        entry = {"steps": int(a.shape[0]), "episodes": len(success[k]), "success_rate": float(np.mean(success[k])),
-                 "act": stats(a[:, 0]), "act_cpu": stats(a[:, 1])}
+        entry = {
+            "steps": int(a.shape[0]),
+            "episodes": len(success[k]),
+            "success_rate": float(np.mean(success[k])),
+            "act": stats(a[:, 0]),
+            "act_cpu": stats(a[:, 1]),
+        }
         if k == "vlfm":
             entry["phases"] = {p: stats(a[:, 2 + i]) for i, p in enumerate(PHASES)}
         out["agents"][k] = entry
     v, f = out["agents"]["vlfm"], out["agents"]["frontier"]
     out["ratio_vlfm_over_frontier"] = {
-        "median": v["act"]["median_ms"] / f["act"]["median_ms"], "mean": v["act"]["mean_ms"] / f["act"]["mean_ms"],
+        "median": v["act"]["median_ms"] / f["act"]["median_ms"],
+        "mean": v["act"]["mean_ms"] / f["act"]["mean_ms"],
         "median_cpu": v["act_cpu"]["median_ms"] / f["act_cpu"]["median_ms"],
     }
     for k, e in out["agents"].items():
-        print(f"{k:>9}: {e['steps']} steps, act median {e['act']['median_ms']:.2f} p95 {e['act']['p95_ms']:.2f} "
-              f"mean {e['act']['mean_ms']:.2f} ms (cpu median {e['act_cpu']['median_ms']:.2f}), "
-              f"SR {e['success_rate']:.2f}")
+        print(
+            f"{k:>9}: {e['steps']} steps, act median {e['act']['median_ms']:.2f} p95 {e['act']['p95_ms']:.2f} "
+            f"mean {e['act']['mean_ms']:.2f} ms (cpu median {e['act_cpu']['median_ms']:.2f}), "
+            f"SR {e['success_rate']:.2f}"
+        )
     print("vlfm phases (median ms): " + ", ".join(f"{p} {v['phases'][p]['median_ms']:.2f}" for p in PHASES))
     r = out["ratio_vlfm_over_frontier"]
     print(f"ratio vlfm / frontier: median {r['median']:.1f}x, mean {r['mean']:.1f}x, cpu median {r['median_cpu']:.1f}x")

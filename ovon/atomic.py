@@ -17,9 +17,17 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 
-def check_output_path(path: str | Path, what: str = "--out", *, folder: bool = False, expected: str = "",
-                      example: str = "", suffixes: tuple[str, ...] = (), writable: bool = True,
-                      error: type[ValueError] = ValueError) -> Path:
+def check_output_path(
+    path: str | Path,
+    what: str = "--out",
+    *,
+    folder: bool = False,
+    expected: str = "",
+    example: str = "",
+    suffixes: tuple[str, ...] = (),
+    writable: bool = True,
+    error: type[ValueError] = ValueError,
+) -> Path:
     """Refuse an output path that cannot be written, before any work: one line naming the option, the
     path, why, and the fix. Why here: every writer of the project goes through this module, and a
     command that renders or trains first would otherwise fail at its very end (`f/x.png` with `f` a file).
@@ -40,20 +48,24 @@ def check_output_path(path: str | Path, what: str = "--out", *, folder: bool = F
     p = Path(text)
     existing = next((a for a in (p, *p.parents) if os.path.lexists(a)), Path("."))
     if existing != p and not existing.is_dir():
-        raise error(f"{what} {text}: {existing} is an existing file, not a folder, so nothing can be written "
-                    f"under it; fix: choose another {what} (or move {existing} away)")
+        raise error(
+            f"{what} {text}: {existing} is an existing file, not a folder, so nothing can be written "
+            f"under it; fix: choose another {what} (or move {existing} away)"
+        )
     if existing == p and folder and not p.is_dir():
-        raise error(f"{what} {text} is an existing file, not a folder; fix: choose a folder path (it is created "
-                    "when absent)")
+        raise error(
+            f"{what} {text} is an existing file, not a folder; fix: choose a folder path (it is created when absent)"
+        )
     if existing == p and not folder and p.is_dir():
         raise error(f"{what} {text!r} is a folder; expected {shown}; fix: e.g. {what} {p / (example or 'out')}")
     if suffixes and not folder and not p.name.lower().endswith(tuple(s.lower() for s in suffixes)):
-        raise error(f"{what} {text!r}: expected {shown} (a name ending with {' or '.join(suffixes)}); fix: e.g. "
-                    f"{what} {p.with_name(p.stem + suffixes[0])}")
+        raise error(
+            f"{what} {text!r}: expected {shown} (a name ending with {' or '.join(suffixes)}); fix: e.g. "
+            f"{what} {p.with_name(p.stem + suffixes[0])}"
+        )
     into = existing if existing.is_dir() else existing.parent
     if writable and not os.access(into, os.W_OK | os.X_OK):
-        raise error(f"{what} {text}: cannot write in {into} (permission denied); fix: choose a {noun} you "
-                    "can write")
+        raise error(f"{what} {text}: cannot write in {into} (permission denied); fix: choose a {noun} you can write")
     return p
 
 
@@ -81,8 +93,10 @@ def _create_temp(folder: Path, name: str, suffix: str = ".tmp") -> tuple[int, Pa
             return os.open(tmp, flags, NEW_FILE_MODE), tmp
         except FileExistsError:
             continue
-    raise FileExistsError(f"{folder}: no free temp file name for {name} after {_TEMP_TRIES} tries; fix: remove the "
-                          f"stale .{name}.*{suffix} files there")
+    raise FileExistsError(
+        f"{folder}: no free temp file name for {name} after {_TEMP_TRIES} tries; fix: remove the "
+        f"stale .{name}.*{suffix} files there"
+    )
 
 
 def _fsync(path: Path) -> None:

@@ -77,8 +77,9 @@ def die_with_parent() -> bool:
         sentinel = parent.sentinel
     except (AttributeError, ValueError):
         sentinel = None
-    threading.Thread(target=_watchdog, args=(parent_pid or -1, sentinel), name="ovon-parent-watchdog",
-                     daemon=True).start()
+    threading.Thread(
+        target=_watchdog, args=(parent_pid or -1, sentinel), name="ovon-parent-watchdog", daemon=True
+    ).start()
     return True
 
 
@@ -121,8 +122,7 @@ def run_jobs(fn: Callable[[Any], Any], jobs: list, workers: int = 1, executor: s
         import ray
 
         if not ray.is_initialized():
-            ray.init(address=os.environ.get("RAY_ADDRESS") or None, include_dashboard=False,
-                     log_to_driver=False)
+            ray.init(address=os.environ.get("RAY_ADDRESS") or None, include_dashboard=False, log_to_driver=False)
         remote = ray.remote(num_cpus=1)(fn)
         pending = [remote.remote(j) for j in jobs]
         try:
@@ -152,9 +152,10 @@ def run_jobs(fn: Callable[[Any], Any], jobs: list, workers: int = 1, executor: s
             try:
                 result = f.result()
             except BrokenProcessPool:
-                raise WorkerDied("a worker process died (killed, or out of memory) before finishing its job; "
-                                   "fix: re-run the same command to resume, with fewer --workers if memory is short"
-                                   ) from None
+                raise WorkerDied(
+                    "a worker process died (killed, or out of memory) before finishing its job; "
+                    "fix: re-run the same command to resume, with fewer --workers if memory is short"
+                ) from None
             yield result
         finished = True
     finally:
@@ -169,6 +170,7 @@ def progress_bar(description: str, total: int, enabled: bool = True):
     from contextlib import nullcontext
 
     if not enabled:
+
         class _Null:
             def advance(self, n: int = 1) -> None:
                 pass
@@ -178,8 +180,13 @@ def progress_bar(description: str, total: int, enabled: bool = True):
 
     class _Bar:
         def __init__(self) -> None:
-            self.p = Progress("[bold]{task.description}", BarColumn(), MofNCompleteColumn(),
-                              TimeElapsedColumn(), TimeRemainingColumn())
+            self.p = Progress(
+                "[bold]{task.description}",
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeElapsedColumn(),
+                TimeRemainingColumn(),
+            )
             self.t = self.p.add_task(description, total=total)
 
         def __enter__(self):

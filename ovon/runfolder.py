@@ -79,8 +79,9 @@ def listing_sha256(root: str | Path, exclude: Iterable[str | Path] = ()) -> str:
     skip = {path_identity(p) for p in exclude}
     h = hashlib.sha256()
     for dirpath, dirnames, filenames in os.walk(root):
-        dirnames[:] = sorted(d for d in dirnames if not d.startswith(".")
-                             and path_identity(Path(dirpath) / d) not in skip)
+        dirnames[:] = sorted(
+            d for d in dirnames if not d.startswith(".") and path_identity(Path(dirpath) / d) not in skip
+        )
         for name in sorted(filenames):
             if name.startswith("."):
                 continue
@@ -176,8 +177,14 @@ class FileLock:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         folder = self.path.parent
         self.fd: int | None = None
-        info = json.dumps({"pid": os.getpid(), "host": socket.gethostname(),
-                           "since": time.strftime("%Y-%m-%d %H:%M:%S"), "command": " ".join(sys.argv)[:500]})
+        info = json.dumps(
+            {
+                "pid": os.getpid(),
+                "host": socket.gethostname(),
+                "since": time.strftime("%Y-%m-%d %H:%M:%S"),
+                "command": " ".join(sys.argv)[:500],
+            }
+        )
         busy = RunFolderError(
             f"{folder} is in use by another ovon process ({{holder}}); fix: wait for it to finish, or "
             f"choose another {what}"
@@ -285,16 +292,21 @@ class RunFolder:
         try:
             path.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise RunFolderError(f"{what} {path}: cannot create the folder ({e.strerror}); fix: choose a "
-                                 "writable folder") from None
+            raise RunFolderError(
+                f"{what} {path}: cannot create the folder ({e.strerror}); fix: choose a writable folder"
+            ) from None
         lock = FileLock(path / LOCK_FILE, what)
         try:
             # Keys that may change are not part of what the folder is: not stored, not compared.
             may = tuple(may_change)
-            identity = {"format": FORMAT, "kind": kind,
-                        "config": _without(_jsonable(dict(config)), [m for m in may if not m.startswith("inputs.")]),
-                        "inputs": _without(_jsonable(dict(inputs or {})),
-                                           [m.removeprefix("inputs.") for m in may if m.startswith("inputs.")])}
+            identity = {
+                "format": FORMAT,
+                "kind": kind,
+                "config": _without(_jsonable(dict(config)), [m for m in may if not m.startswith("inputs.")]),
+                "inputs": _without(
+                    _jsonable(dict(inputs or {})), [m.removeprefix("inputs.") for m in may if m.startswith("inputs.")]
+                ),
+            }
             stored, resumed = cls._reconcile(path, kind, identity, resume, may, markers, what)
         except BaseException:
             lock.release()
@@ -318,8 +330,15 @@ class RunFolder:
         return removed
 
     @staticmethod
-    def _reconcile(path: Path, kind: str, identity: dict, resume: bool, may_change: tuple[str, ...],
-                   markers: Iterable[str], what: str) -> tuple[dict, bool]:
+    def _reconcile(
+        path: Path,
+        kind: str,
+        identity: dict,
+        resume: bool,
+        may_change: tuple[str, ...],
+        markers: Iterable[str],
+        what: str,
+    ) -> tuple[dict, bool]:
         ident_path = path / IDENTITY_FILE
         fix = f"fix: re-run with the settings it was created with, or choose another {what}"
         if not ident_path.exists():
@@ -327,7 +346,8 @@ class RunFolder:
             if found:
                 raise RunFolderError(
                     f"{path} holds {', '.join(found)} but no {IDENTITY_FILE} (written by an older ovon or another "
-                    f"tool), so a resume cannot be checked; fix: choose another {what}, or move those files away")
+                    f"tool), so a resume cannot be checked; fix: choose another {what}, or move those files away"
+                )
             write_json(ident_path, identity)
             return identity, False
         try:
@@ -335,24 +355,32 @@ class RunFolder:
             if not isinstance(old, dict) or not isinstance(old.get("config"), dict):
                 raise ValueError("not an identity object")
         except (OSError, ValueError, RecursionError) as e:
-            raise RunFolderError(f"{ident_path} is unreadable ({type(e).__name__}); fix: choose another {what}, or "
-                                 "restore the file") from None
+            raise RunFolderError(
+                f"{ident_path} is unreadable ({type(e).__name__}); fix: choose another {what}, or restore the file"
+            ) from None
         if old.get("kind") != kind:
-            raise RunFolderError(f"{path} holds a run of kind {old.get('kind')!r}, not {kind!r}; fix: choose another "
-                                 f"{what}")
+            raise RunFolderError(
+                f"{path} holds a run of kind {old.get('kind')!r}, not {kind!r}; fix: choose another {what}"
+            )
         if not resume:
-            raise RunFolderError(f"{path} already holds a {kind} run; fix: pass --resume to continue it, or choose "
-                                 f"another {what}")
-        diffs = differences({"config": old["config"], "inputs": old.get("inputs", {})},
-                            {"config": identity["config"], "inputs": identity["inputs"]},
-                            ("config." + m if not m.startswith("inputs.") else m for m in may_change))
+            raise RunFolderError(
+                f"{path} already holds a {kind} run; fix: pass --resume to continue it, or choose another {what}"
+            )
+        diffs = differences(
+            {"config": old["config"], "inputs": old.get("inputs", {})},
+            {"config": identity["config"], "inputs": identity["inputs"]},
+            ("config." + m if not m.startswith("inputs.") else m for m in may_change),
+        )
         if diffs:
             shown = "; ".join(d.removeprefix("config.") for d in diffs[:8])
             more = f"; and {len(diffs) - 8} more" if len(diffs) > 8 else ""
             raise RunFolderError(f"{path} holds another {kind} run (settings differ: {shown}{more}); {fix}")
         # Same run: keys seen only now (a split added later) join the identity, so later changes show.
-        merged = {**old, "config": _union(old["config"], identity["config"]),
-                  "inputs": _union(old.get("inputs", {}), identity["inputs"])}
+        merged = {
+            **old,
+            "config": _union(old["config"], identity["config"]),
+            "inputs": _union(old.get("inputs", {}), identity["inputs"]),
+        }
         if merged != old:
             write_json(ident_path, merged)
         return merged, True

@@ -166,6 +166,5 @@ def write_trimesh(mesh: Mesh, path) -> None:  # noqa: ANN001
     """PLY or OBJ (by suffix) through trimesh, with vertex colours when the mesh has them."""
     import trimesh
 
-    tm = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False,
-                         vertex_colors=mesh.vertex_colors)
+    tm = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False, vertex_colors=mesh.vertex_colors)
     tm.export(path)

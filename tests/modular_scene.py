@@ -26,8 +26,14 @@ START = (1.5, 0.0, 2.5)
 def _instance(iid: int, label: str, lo, hi) -> ObjectInstance:
     lo_a, hi_a = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     return ObjectInstance(
-        id=iid, raw_label=label, category=label, aabb_min=lo_a, aabb_max=hi_a, obb_center=(lo_a + hi_a) / 2,
-        obb_half_extents=(hi_a - lo_a) / 2, obb_rotation=np.eye(3),
+        id=iid,
+        raw_label=label,
+        category=label,
+        aabb_min=lo_a,
+        aabb_max=hi_a,
+        obb_center=(lo_a + hi_a) / 2,
+        obb_half_extents=(hi_a - lo_a) / 2,
+        obb_rotation=np.eye(3),
     )
 
 
@@ -46,8 +52,10 @@ def two_room_scene(scene_id: str = "two-rooms") -> Scene:
         cols.append(np.tile(rng.integers(60, 220, 3).astype(np.uint8), (len(f), 1)))
         off += len(v)
     mesh = Mesh(
-        vertices=np.concatenate(verts).astype(np.float32), faces=np.concatenate(faces).astype(np.int32),
-        face_colors=np.concatenate(cols), face_instance=np.concatenate(inst),
+        vertices=np.concatenate(verts).astype(np.float32),
+        faces=np.concatenate(faces).astype(np.int32),
+        face_colors=np.concatenate(cols),
+        face_instance=np.concatenate(inst),
     )
     objects = [_instance(i, name, *b) for i, (name, b) in OBJECTS.items()]
     return Scene(scene_id=scene_id, mesh=mesh, objects=objects, floor_heights=[0.0], source="test")

@@ -70,18 +70,25 @@ def _tiny(**changes: Any):
         ({"num_envs": 0}, {"procedural": "0"}, "num_envs = 0: expected an integer > 0"),
         ({"lr": -1.0}, {"procedural": "0"}, "lr = -1.0: expected a number >= 0"),
         ({"device": "tpu"}, {"procedural": "0"}, "device = 'tpu': expected auto, cpu"),
-        ({"algo": "ppo", "num_envs": 2, "ppo.minibatches": 4}, {"procedural": "0"},
-         "ppo.minibatches = 4, num_envs = 2: expected ppo.minibatches <= num_envs for algo ppo"),
-        ({"algo": "ppo", "learn_dtype": "bfloat16"}, {"procedural": "0"},
-         "learn_dtype = 'bfloat16', algo = 'ppo': expected learn_dtype float32 for algo ppo"),
+        (
+            {"algo": "ppo", "num_envs": 2, "ppo.minibatches": 4},
+            {"procedural": "0"},
+            "ppo.minibatches = 4, num_envs = 2: expected ppo.minibatches <= num_envs for algo ppo",
+        ),
+        (
+            {"algo": "ppo", "learn_dtype": "bfloat16"},
+            {"procedural": "0"},
+            "learn_dtype = 'bfloat16', algo = 'ppo': expected learn_dtype float32 for algo ppo",
+        ),
         ({"learn_dtype": "float16"}, {"procedural": "0"}, "learn_dtype = 'float16': expected"),
         ({}, {"procedural": "0", "limit": -1}, "EpisodeSource(limit=-1): expected an integer > 0"),
         ({}, {"procedural": "0", "limit": 0}, "EpisodeSource(limit=0)"),
         ({}, {"procedural": "0", "task": "imagenav"}, "EpisodeSource(task='imagenav')"),
     ],
 )
-def test_train_refuses_a_bad_config_or_source_before_writing(tmp_path: Path, changes: dict, source: dict,
-                                                             needle: str) -> None:
+def test_train_refuses_a_bad_config_or_source_before_writing(
+    tmp_path: Path, changes: dict, source: dict, needle: str
+) -> None:
     from ovon.train import EpisodeSource, train
     from ovon.train.config import PPOConfig
 
@@ -149,8 +156,11 @@ def test_the_cli_and_python_accept_the_same_train_configs(tmp_path) -> None:
     from ovon.train.config import build_config
 
     def cli(algo: str, *sets: str):
-        return build_config(SimpleNamespace(algo=algo, expert=None, task=None, preset="tiny", policy=None,
-                                            encoder=None, config=None, set=list(sets)))
+        return build_config(
+            SimpleNamespace(
+                algo=algo, expert=None, task=None, preset="tiny", policy=None, encoder=None, config=None, set=list(sets)
+            )
+        )
 
     cfg = cli("dagger", "lr=0", "num_envs=1")
     assert cfg.lr == 0.0 and cfg.num_envs == 1 and cfg.ppo.minibatches == 2
@@ -207,8 +217,9 @@ def test_policy_agent_arguments_are_checked_before_the_checkpoint(tmp_path: Path
     assert needle in str(e.value) and "fix:" in str(e.value)
 
 
-@pytest.mark.parametrize(("agent", "arg"), [("policy", "temperature=.nan"), ("random", "seed=.inf"),
-                                            ("random", "x=[1, .nan]")])
+@pytest.mark.parametrize(
+    ("agent", "arg"), [("policy", "temperature=.nan"), ("random", "seed=.inf"), ("random", "x=[1, .nan]")]
+)
 def test_a_nan_agent_argument_names_its_key(roots: list[str], tmp_path: Path, capsys, agent: str, arg: str) -> None:
     extra = ["--checkpoint", str(tmp_path / "p.pt")] if agent == "policy" else []
     rc, _, errors = run(["evaluate", "--agent", agent, "--agent-arg", arg, *extra, *roots], capsys)
@@ -250,8 +261,7 @@ def fake_server(reply: Callable[[dict], list[bytes]]) -> Iterator[int]:
 
 
 def hello(header: dict, **fields: Any) -> list[bytes]:
-    base = {"op": "hello", "id": header.get("id"), "protocol": 1, "agent": "fake", "privileged": False,
-            "batch": False}
+    base = {"op": "hello", "id": header.get("id"), "protocol": 1, "agent": "fake", "privileged": False, "batch": False}
     return [msgpack.packb({**base, **fields}, use_bin_type=True)]
 
 
@@ -269,7 +279,8 @@ def test_a_reply_that_is_not_the_protocol_is_a_remote_error_naming_the_address(k
             Client("127.0.0.1", port, timeout_s=5)
         assert e.value.kind == "protocol"
         assert f"the agent at tcp://127.0.0.1:{port} answered the handshake with a message that does not follow" in str(
-            e.value)
+            e.value
+        )
         with pytest.raises(RemoteError) as e:
             check_remote(f"remote:127.0.0.1:{port}", RemoteConfig(timeout_s=5))
         assert f"127.0.0.1:{port}" in str(e.value) and "fix: check that" in str(e.value)
@@ -294,8 +305,9 @@ def test_garbage_during_a_run_names_the_episode_and_the_step() -> None:
 
 def test_a_garbage_reply_on_the_command_line_is_one_remote_line(roots: list[str], tmp_path: Path, capsys) -> None:
     with fake_server(GARBAGE["not msgpack"]) as port:
-        rc, _, errors = run(["evaluate", "--agent", f"remote:127.0.0.1:{port}", "--set", "remote.timeout_s=5",
-                              *roots], capsys)
+        rc, _, errors = run(
+            ["evaluate", "--agent", f"remote:127.0.0.1:{port}", "--set", "remote.timeout_s=5", *roots], capsys
+        )
     one_line(rc, errors, f"tcp://127.0.0.1:{port} answered the handshake")
     assert not (tmp_path / "out").exists()
 
@@ -335,8 +347,9 @@ def test_good_handshake_observations_are_kept_in_order() -> None:
         ("remote:[127.0.0.1]:5555", "in brackets is not an IPv6 address"),
     ],
 )
-def test_bad_hosts_are_refused_before_connecting(agent: str, needle: str, roots: list[str], tmp_path: Path,
-                                                 capsys) -> None:
+def test_bad_hosts_are_refused_before_connecting(
+    agent: str, needle: str, roots: list[str], tmp_path: Path, capsys
+) -> None:
     with pytest.raises(ConfigError, match="fix: --agent remote:HOST:PORT") as e:
         parse_address(agent)
     assert needle in str(e.value)
@@ -345,8 +358,9 @@ def test_bad_hosts_are_refused_before_connecting(agent: str, needle: str, roots:
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("agent", ["remote:[::1]:5555", "remote:localhost:5555", "remote:my-host.lan:80",
-                                   "remote:10.0.0.1:1"])
+@pytest.mark.parametrize(
+    "agent", ["remote:[::1]:5555", "remote:localhost:5555", "remote:my-host.lan:80", "remote:10.0.0.1:1"]
+)
 def test_good_hosts_parse(agent: str) -> None:
     host, port = parse_address(agent)
     assert host and 1 <= port <= 65535

@@ -19,8 +19,6 @@ FIXTURE_SCENE = Path(__file__).parent / "fixtures" / "hm3dsem" / "00001-FixtureS
 DEFS = Path(__file__).resolve().parents[1] / "ovon" / "experiments" / "defs"
 
 
-
-
 @pytest.fixture
 def a_file(tmp_path: Path) -> Path:
     f = tmp_path / "f"
@@ -40,8 +38,24 @@ def fake_run(tmp_path: Path) -> Path:
 @pytest.mark.parametrize("episodes", ["-1", "0", "abc"])
 def test_train_episodes_outside_its_domain_is_one_line(tmp_path, capsys, episodes):
     out = tmp_path / "r"
-    rc, _, errors = run(["train", "--algo", "bc", "--preset", "tiny", "--data", str(tmp_path / "eps"), "--scenes",
-                         str(tmp_path), "--episodes", episodes, "--out", str(out)], capsys)
+    rc, _, errors = run(
+        [
+            "train",
+            "--algo",
+            "bc",
+            "--preset",
+            "tiny",
+            "--data",
+            str(tmp_path / "eps"),
+            "--scenes",
+            str(tmp_path),
+            "--episodes",
+            episodes,
+            "--out",
+            str(out),
+        ],
+        capsys,
+    )
     one_line(rc, errors, "--episodes", repr(int(episodes)) if episodes != "abc" else "'abc'", "integer > 0")
     assert not out.exists()
 
@@ -49,16 +63,38 @@ def test_train_episodes_outside_its_domain_is_one_line(tmp_path, capsys, episode
 # -- D10: an output path under an existing file ---------------------------------------------------------
 def _under_file_cases(f: Path, run_dir: Path) -> list[list[str]]:
     return [
-        ["sim", "view", "procedural:3", "--pose", "1,0,1,0", "--width", "40", "--height", "30", "--out",
-         str(f / "x.png")],
+        [
+            "sim",
+            "view",
+            "procedural:3",
+            "--pose",
+            "1,0,1,0",
+            "--width",
+            "40",
+            "--height",
+            "30",
+            "--out",
+            str(f / "x.png"),
+        ],
         ["scenes", "render-topdown", str(FIXTURE_SCENE), "--out", str(f / "x.png")],
         ["scenes", "generate", "--split", "val", "--count", "1", "--out", str(f / "s")],
         ["dataset", "splits", "--vocabulary", "--out", str(f / "c.json")],
         ["dataset", "generate", "--scenes", str(FIXTURE_SCENE.parent), "--out", str(f / "d"), "--no-progress"],
         ["report", str(run_dir), "--out", str(f)],
         ["report", str(run_dir), "--out", str(f / "rep")],
-        ["video", "--run", str(run_dir), "--episode", "0", "--split", "val_seen", "--seed", "0", "--out",
-         str(f / "v.mp4")],
+        [
+            "video",
+            "--run",
+            str(run_dir),
+            "--episode",
+            "0",
+            "--split",
+            "val_seen",
+            "--seed",
+            "0",
+            "--out",
+            str(f / "v.mp4"),
+        ],
         ["curve", str(run_dir), "--out", str(f / "c.png")],
         ["train", "--algo", "bc", "--preset", "tiny", "--out", str(f / "t")],
         ["experiment", "run", "noise", "--scale", "tiny", "--root", str(f / "r"), "--dry-run"],
@@ -93,8 +129,10 @@ def test_os_errors_naming_a_path_are_one_line_naming_it(a_file, tmp_path, capsys
     monkeypatch.delenv("OVON_DEBUG", raising=False)
     cases = [
         (FileExistsError(errno.EEXIST, "File exists", str(a_file)), [str(a_file), "existing file, not a folder"]),
-        (NotADirectoryError(errno.ENOTDIR, "Not a directory", str(a_file / "x.png")),
-         [f"{a_file / 'x.png'}: {a_file} is an existing file"]),
+        (
+            NotADirectoryError(errno.ENOTDIR, "Not a directory", str(a_file / "x.png")),
+            [f"{a_file / 'x.png'}: {a_file} is an existing file"],
+        ),
         (OSError(errno.EROFS, "Read-only file system", str(tmp_path / "ro")), [str(tmp_path / "ro"), "Read-only"]),
         (OSError(errno.ENOSPC, "No space left on device"), ["No space left", "free disk space"]),
     ]
@@ -156,8 +194,9 @@ def test_run_folder_refuses_an_empty_path(tmp_path, monkeypatch):
 # -- D12: an experiment run naming no experiment ----------------------------------------------------------
 @pytest.mark.parametrize("name", ["", ",", " , "])
 def test_experiment_run_without_a_name_is_refused(tmp_path, capsys, name):
-    rc, out, errors = run(["experiment", "run", name, "--scale", "tiny", "--root", str(tmp_path / "R"), "--dry-run"],
-                          capsys)
+    rc, out, errors = run(
+        ["experiment", "run", name, "--scale", "tiny", "--root", str(tmp_path / "R"), "--dry-run"], capsys
+    )
     one_line(rc, errors, "names no experiment", "main")
     assert "data:data" not in out and not (tmp_path / "R").exists()
 
@@ -179,8 +218,21 @@ def test_cell_status_under_a_root_that_is_a_file_names_the_root(a_file):
 
 
 def test_unknown_redo_cell_names_redo(tmp_path, capsys):
-    rc, _, errors = run(["experiment", "run", "noise", "--scale", "tiny", "--root", str(tmp_path / "R"), "--redo",
-                         "nosuch", "--dry-run"], capsys)
+    rc, _, errors = run(
+        [
+            "experiment",
+            "run",
+            "noise",
+            "--scale",
+            "tiny",
+            "--root",
+            str(tmp_path / "R"),
+            "--redo",
+            "nosuch",
+            "--dry-run",
+        ],
+        capsys,
+    )
     line = one_line(rc, errors, "--redo: no cell 'nosuch'")
     assert "--only" not in line
 
@@ -188,15 +240,29 @@ def test_unknown_redo_cell_names_redo(tmp_path, capsys):
 def test_a_definition_file_value_is_fixed_in_the_file_not_with_set(tmp_path, capsys):
     bad = tmp_path / "badkind.yaml"
     bad.write_text((DEFS / "noise.yaml").read_text().replace("kind: smaller_drop", "kind: bogus"))
-    rc, _, errors = run(["experiment", "run", str(bad), "--scale", "tiny", "--root", str(tmp_path / "R"),
-                         "--dry-run"], capsys)
+    rc, _, errors = run(
+        ["experiment", "run", str(bad), "--scale", "tiny", "--root", str(tmp_path / "R"), "--dry-run"], capsys
+    )
     line = one_line(rc, errors, "'bogus'", f"fix: edit {bad} at findings[0].checks[0].kind")
     assert "--set" not in line and line.count("fix:") == 1
 
 
 def test_a_set_value_is_fixed_with_set_as_typed(tmp_path, capsys):
-    rc, _, errors = run(["experiment", "run", "noise", "--scale", "tiny", "--root", str(tmp_path / "R"), "--set",
-                         "evaluate.seeds=abc", "--dry-run"], capsys)
+    rc, _, errors = run(
+        [
+            "experiment",
+            "run",
+            "noise",
+            "--scale",
+            "tiny",
+            "--root",
+            str(tmp_path / "R"),
+            "--set",
+            "evaluate.seeds=abc",
+            "--dry-run",
+        ],
+        capsys,
+    )
     line = one_line(rc, errors, "evaluate.seeds = 'abc'", "fix: --set evaluate.seeds=VALUE")
     assert "--set --set" not in line and "--set." not in line
 
@@ -204,17 +270,20 @@ def test_a_set_value_is_fixed_with_set_as_typed(tmp_path, capsys):
 def test_a_folder_given_as_a_yaml_file_is_named_a_folder(tmp_path, capsys):
     folder = tmp_path / "exp.yaml"
     folder.mkdir()
-    rc, _, errors = run(["experiment", "run", str(folder), "--scale", "tiny", "--root", str(tmp_path / "R"),
-                         "--dry-run"], capsys)
+    rc, _, errors = run(
+        ["experiment", "run", str(folder), "--scale", "tiny", "--root", str(tmp_path / "R"), "--dry-run"], capsys
+    )
     assert "does not exist" not in one_line(rc, errors, str(folder), "is a folder")
-    rc, _, errors = run(["train", "--algo", "bc", "--preset", "tiny", "--config", str(folder), "--out",
-                         str(tmp_path / "t")], capsys)
+    rc, _, errors = run(
+        ["train", "--algo", "bc", "--preset", "tiny", "--config", str(folder), "--out", str(tmp_path / "t")], capsys
+    )
     assert "does not exist" not in one_line(rc, errors, "--config", "is a folder")
     assert not (tmp_path / "t").exists()
 
 
-def test_video_from_another_folder_finds_the_runs_relative_inputs(tiny_dataset, tiny_scenes, tmp_path, capsys,
-                                                                  monkeypatch):
+def test_video_from_another_folder_finds_the_runs_relative_inputs(
+    tiny_dataset, tiny_scenes, tmp_path, capsys, monkeypatch
+):
     """run.json keeps --data / --scenes as typed (relative to where `ovon evaluate` ran); `ovon video` run
     elsewhere takes them from run_identity.json (absolute) instead of failing with "does not exist"."""
     where = tmp_path / "project"
@@ -223,17 +292,47 @@ def test_video_from_another_folder_finds_the_runs_relative_inputs(tiny_dataset, 
     os.symlink(tiny_scenes, where / "data" / "scenes")
     monkeypatch.chdir(where)
     run_dir = tmp_path / "run"
-    rc, _, errors = run(["evaluate", "--agent", "random", "--data", "data/eps", "--scenes", "data/scenes", "--splits",
-                         "val_seen", "--episodes", "1", "--workers", "1", "--out", str(run_dir), "--no-progress"],
-                        capsys)
+    rc, _, errors = run(
+        [
+            "evaluate",
+            "--agent",
+            "random",
+            "--data",
+            "data/eps",
+            "--scenes",
+            "data/scenes",
+            "--splits",
+            "val_seen",
+            "--episodes",
+            "1",
+            "--workers",
+            "1",
+            "--out",
+            str(run_dir),
+            "--no-progress",
+        ],
+        capsys,
+    )
     assert rc == 0, errors
     assert json.loads((run_dir / "run.json").read_text())["data"] == "data/eps"
     episode = json.loads((run_dir / "episodes.jsonl").read_text().splitlines()[0])["episode_id"]
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
-    video = ["video", "--run", str(run_dir), "--episode", str(episode), "--split", "val_seen", "--seed", "0",
-             "--no-agent-view", "--out", "v.mp4"]
+    video = [
+        "video",
+        "--run",
+        str(run_dir),
+        "--episode",
+        str(episode),
+        "--split",
+        "val_seen",
+        "--seed",
+        "0",
+        "--no-agent-view",
+        "--out",
+        "v.mp4",
+    ]
     rc, out, errors = run(video, capsys)
     assert rc == 0 and errors == [], errors
     assert (elsewhere / "v.mp4").stat().st_size > 0

@@ -15,8 +15,12 @@ from ovon.models.policy import ActorCritic, build_policy
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 ENC = dataclasses.replace(EncoderConfig(image="cnn"), cnn_dim=16, cnn_channels=(8, 8))
-OBS = {"rgb": np.zeros((32, 32, 3), np.uint8), "depth": np.ones((32, 32), np.float32), "goal": "couch",
-       "pointgoal": np.ones(3, np.float32)}
+OBS = {
+    "rgb": np.zeros((32, 32, 3), np.uint8),
+    "depth": np.ones((32, 32), np.float32),
+    "goal": "couch",
+    "pointgoal": np.ones(3, np.float32),
+}
 
 
 def test_load_puts_the_policy_on_the_gpu(tmp_path) -> None:

@@ -71,8 +71,15 @@ def test_val_allocation_is_proportional_to_scene_counts():
 
 def test_same_seed_gives_identical_shards_and_rerun_skips(tiny_dataset, tiny_scenes, tmp_path):
     out = tmp_path / "again"
-    generate(tiny_scenes, out, tiny_generation_config(), splits=("val_seen",), workers=1, progress=False,
-             category_split_path=tiny_dataset / "categories.json")
+    generate(
+        tiny_scenes,
+        out,
+        tiny_generation_config(),
+        splits=("val_seen",),
+        workers=1,
+        progress=False,
+        category_split_path=tiny_dataset / "categories.json",
+    )
     ref = {k: v for k, v in shard_bytes(tiny_dataset).items() if k.startswith("val_seen/")}
     assert shard_bytes(out) == ref
     mtimes = {p: p.stat().st_mtime_ns for p in out.glob("*/content/*.json.gz")}
@@ -86,19 +93,48 @@ def test_ray_generation_gives_the_same_shards(tiny_dataset, tiny_scenes, tmp_pat
     """The Ray executor (paper scale) writes the bytes the process pool writes."""
     pytest.importorskip("ray")
     out = tmp_path / "ray"
-    generate(tiny_scenes, out, tiny_generation_config(), splits=("val_seen",), workers=2, executor="ray",
-             progress=False, category_split_path=tiny_dataset / "categories.json")
+    generate(
+        tiny_scenes,
+        out,
+        tiny_generation_config(),
+        splits=("val_seen",),
+        workers=2,
+        executor="ray",
+        progress=False,
+        category_split_path=tiny_dataset / "categories.json",
+    )
     ref = {k: v for k, v in shard_bytes(tiny_dataset).items() if k.startswith("val_seen/")}
     assert shard_bytes(out) == ref
 
 
 def test_kill_during_generation_then_rerun_completes(tiny_dataset, tiny_scenes, tmp_path):
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "ovon.cli.main", "dataset", "generate", "--scenes", str(tiny_scenes),
-           "--out", str(out), "--workers", "1", "--no-progress", "--categories",
-           str(tiny_dataset / "categories.json"), "--split", "val_seen",
-           "--set", "episodes_per_val_split=16", "--set", "episodes_per_train_scene=12",
-           "--set", "viewpoints.render_size=48", "--set", "viewpoints.max_viewpoints=6"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "ovon.cli.main",
+        "dataset",
+        "generate",
+        "--scenes",
+        str(tiny_scenes),
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--no-progress",
+        "--categories",
+        str(tiny_dataset / "categories.json"),
+        "--split",
+        "val_seen",
+        "--set",
+        "episodes_per_val_split=16",
+        "--set",
+        "episodes_per_train_scene=12",
+        "--set",
+        "viewpoints.render_size=48",
+        "--set",
+        "viewpoints.max_viewpoints=6",
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 120
     while time.time() < deadline and not list((out / ".cache" / "goals").glob("*.json.gz")):
@@ -140,12 +176,22 @@ def test_shortest_path_oracle_finishes_every_generated_episode(tiny_dataset, tin
             nav = build_navigation(load_scene_any(str(folder)))
             for ep in shard.episodes:
                 grid = nav.grid_for(ep.start_position)
-                vps = [(np.asarray(v.position), quat_to_yaw(v.rotation)) for g in goals_for(ep, shard.goals_by_category)
-                       for v in g.view_points]
+                vps = [
+                    (np.asarray(v.position), quat_to_yaw(v.rotation))
+                    for g in goals_for(ep, shard.goals_by_category)
+                    for v in g.view_points
+                ]
                 fld = distance_field(grid, np.array([p for p, _ in vps]))
                 n += 1
-                ok += oracle_finishes(grid, ep.start_position, quat_to_yaw(ep.start_rotation), vps, fld,
-                                      task.max_steps, task.success_distance)
+                ok += oracle_finishes(
+                    grid,
+                    ep.start_position,
+                    quat_to_yaw(ep.start_rotation),
+                    vps,
+                    fld,
+                    task.max_steps,
+                    task.success_distance,
+                )
     assert n > 20 and ok == n, f"oracle finished {ok} of {n}"
 
 

@@ -18,8 +18,13 @@ SKIP_DIRS = {".git", ".venv", "__pycache__", ".pytest_cache", ".ruff_cache", "no
 def _repo_files() -> list[Path]:
     """Tracked and new (not ignored) files; without git, a walk that skips virtualenvs and outputs."""
     try:
-        out = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
-                             capture_output=True, check=True, timeout=60).stdout
+        out = subprocess.run(
+            ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+            cwd=ROOT,
+            capture_output=True,
+            check=True,
+            timeout=60,
+        ).stdout
         return [ROOT / p for p in out.decode().split("\0") if p and (ROOT / p).is_file()]
     except (OSError, subprocess.SubprocessError):
         return [p for p in ROOT.rglob("*") if p.is_file() and not SKIP_DIRS & set(p.relative_to(ROOT).parts)]
@@ -86,5 +91,9 @@ def test_every_cited_section_exists() -> None:
 
 
 def test_the_anchor_rule_matches_github() -> None:
-    assert _anchors("## Frontier choice\n### <a id=\"dagrl-od\"></a>DAgRL+OD\n## Task: the rules\n") == {
-        "frontier-choice", "dagrl-od", "dagrlod", "task-the-rules"}
+    assert _anchors('## Frontier choice\n### <a id="dagrl-od"></a>DAgRL+OD\n## Task: the rules\n') == {
+        "frontier-choice",
+        "dagrl-od",
+        "dagrlod",
+        "task-the-rules",
+    }

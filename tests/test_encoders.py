@@ -268,8 +268,12 @@ def test_oracle_depth_grid_is_appended_and_scaled():
 def test_oracle_depth_grid_with_nothing_visible_keeps_the_size():
     from ovon.models.encoders.oracle_vl import OracleVLEncoder
 
-    enc = OracleVLEncoder(FunctionTextEncoder(lambda n: np.ones((len(n), 4), np.float32), 4), grid=1,
-                          include_global=False, depth_grid=(2, 2))
+    enc = OracleVLEncoder(
+        FunctionTextEncoder(lambda n: np.ones((len(n), 4), np.float32), 4),
+        grid=1,
+        include_global=False,
+        depth_grid=(2, 2),
+    )
     enc.set_scene({1: "couch"})
     out = enc.encode({"semantic": np.zeros((2, 4, 6), np.int32), "depth": np.ones((2, 4, 6), np.float32)})
     assert out.shape == (2, enc.dim)
@@ -279,11 +283,19 @@ def test_oracle_collision_flag_is_the_last_dim():
     from ovon.models.encoders import image_encoder_dim
     from ovon.models.encoders.oracle_vl import OracleVLEncoder
 
-    enc = OracleVLEncoder(FunctionTextEncoder(lambda n: np.ones((len(n), 4), np.float32), 4), grid=1,
-                          include_global=False, depth_grid=(2, 2), collision=True)
+    enc = OracleVLEncoder(
+        FunctionTextEncoder(lambda n: np.ones((len(n), 4), np.float32), 4),
+        grid=1,
+        include_global=False,
+        depth_grid=(2, 2),
+        collision=True,
+    )
     enc.set_scene({1: "couch"})
-    batch = {"semantic": np.ones((2, 4, 6), np.int32), "depth": np.ones((2, 4, 6), np.float32),
-             "collided": np.array([1, 0])}
+    batch = {
+        "semantic": np.ones((2, 4, 6), np.int32),
+        "depth": np.ones((2, 4, 6), np.float32),
+        "collided": np.array([1, 0]),
+    }
     out = enc.encode(batch)
     assert out.shape == (2, 4 + 8 + 1) and enc.dim == 13
     assert out[:, -1].tolist() == [1.0, 0.0]

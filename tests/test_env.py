@@ -34,8 +34,14 @@ def truth(info: dict):
 
 
 def given(start=(3.0, 0.0, 2.0), yaw_deg=0.0, **kw) -> dict:
-    spec = EpisodeSpec("given", SCENE.scene_id, "couch", start_position=np.array(start, dtype=np.float64),
-                       start_yaw=math.radians(yaw_deg), **kw)
+    spec = EpisodeSpec(
+        "given",
+        SCENE.scene_id,
+        "couch",
+        start_position=np.array(start, dtype=np.float64),
+        start_yaw=math.radians(yaw_deg),
+        **kw,
+    )
     return {"episode": spec}
 
 
@@ -151,11 +157,13 @@ def test_odometry_starts_at_zero_and_tracks_motion():
     np.testing.assert_allclose(obs["odometry"], [0.25, 0.0, math.radians(30)], atol=1e-5)
     obs, _, _, _, info = env.step(MOVE_FORWARD)
     # 30 deg left of the start heading: forward cos30, left sin30 in the start frame
-    np.testing.assert_allclose(obs["odometry"][:2], [0.25 + 0.25 * math.cos(math.radians(30)),
-                                                     0.25 * math.sin(math.radians(30))], atol=1e-5)
+    np.testing.assert_allclose(
+        obs["odometry"][:2], [0.25 + 0.25 * math.cos(math.radians(30)), 0.25 * math.sin(math.radians(30))], atol=1e-5
+    )
     # start frame: forward = -x, left = +z (yaw 90 deg looks along -x)
-    np.testing.assert_allclose(truth(info).state.position[[0, 2]],
-                               [3.0 - obs["odometry"][0], 3.0 + obs["odometry"][1]], atol=1e-5)
+    np.testing.assert_allclose(
+        truth(info).state.position[[0, 2]], [3.0 - obs["odometry"][0], 3.0 + obs["odometry"][1]], atol=1e-5
+    )
     obs, *_ = env.step(LOOK_UP)
     np.testing.assert_allclose(obs["odometry"][2], math.radians(30), atol=1e-5)
     env.close()
@@ -280,8 +288,10 @@ def _vector_trace(workers: int) -> np.ndarray:
     from ovon.env.stack import EnvRecipe, build_env
     from ovon.env.vector import ObjectNavVectorEnv
 
-    recipes = [EnvRecipe(sim=small_sim(), task=TaskConfig(max_steps=3), scene=SCENE, goal=g, privileged=True)
-               for g in ("couch", "toaster", "couch")]
+    recipes = [
+        EnvRecipe(sim=small_sim(), task=TaskConfig(max_steps=3), scene=SCENE, goal=g, privileged=True)
+        for g in ("couch", "toaster", "couch")
+    ]
     vec = ObjectNavVectorEnv([functools.partial(build_env, r) for r in recipes], workers=workers)
     try:
         obs, info = vec.reset(seed=0)
@@ -326,13 +336,53 @@ def test_cli_sim_view_and_bench(tmp_path, capsys):
     assert main(["sim", "view", "procedural:0", "--width", "40", "--height", "30", "--out", str(out)]) == 0
     assert Image.open(out).size == (120, 30)
     out2 = tmp_path / "posed.png"
-    assert main(["sim", "view", "procedural:0", "--pose", "2.4,0,4.3,-90", "--pitch", "-30", "--width", "40",
-                 "--height", "30", "--hfov", "90", "--backend", "embree", "--out", str(out2)]) == 0
+    assert (
+        main(
+            [
+                "sim",
+                "view",
+                "procedural:0",
+                "--pose",
+                "2.4,0,4.3,-90",
+                "--pitch",
+                "-30",
+                "--width",
+                "40",
+                "--height",
+                "30",
+                "--hfov",
+                "90",
+                "--backend",
+                "embree",
+                "--out",
+                str(out2),
+            ]
+        )
+        == 0
+    )
     assert main(["sim", "view", "procedural:0", "--pose", "1,2", "--out", str(out2)]) == 2
     capsys.readouterr()
     for workers in ("0", "1"):
-        assert main(["sim", "bench", "--width", "40", "--height", "30", "--steps", "30", "--workers", workers,
-                     "--envs-per-worker", "2", "--no-rgb"]) == 0
+        assert (
+            main(
+                [
+                    "sim",
+                    "bench",
+                    "--width",
+                    "40",
+                    "--height",
+                    "30",
+                    "--steps",
+                    "30",
+                    "--workers",
+                    workers,
+                    "--envs-per-worker",
+                    "2",
+                    "--no-rgb",
+                ]
+            )
+            == 0
+        )
         last = capsys.readouterr().out.strip().splitlines()[-1]
         value, unit = last.split(" ", 1)
         assert unit == "steps/s" and float(value) > 0

@@ -124,8 +124,12 @@ def test_closed_vector_env_says_it_is_closed():
     vec = vector(workers=0)
     vec.reset(seed=0)
     vec.close()
-    for call in (lambda: vec.step([1, 1]), lambda: vec.reset(), lambda: vec.call("render"),
-                 lambda: vec.set_state([None, None])):
+    for call in (
+        lambda: vec.step([1, 1]),
+        lambda: vec.reset(),
+        lambda: vec.call("render"),
+        lambda: vec.set_state([None, None]),
+    ):
         with pytest.raises(VectorEnvClosedError, match="the vector env is closed") as e:
             call()
         assert isinstance(e.value, ValueError) and isinstance(e.value, gym.error.ClosedEnvironmentError)
@@ -137,17 +141,20 @@ def _camera(**kw) -> SimConfig:
     return SimConfig(camera=CameraConfig(**{"width": 64, "height": 48, **kw}))
 
 
-@pytest.mark.parametrize(("kw", "key"), [
-    ({"task": TaskConfig(success_distance=-1.0)}, "task.success_distance = -1.0"),
-    ({"sim": _camera(min_depth=6.0, max_depth=5.0)}, "sim.camera.min_depth < sim.camera.max_depth"),
-    ({"sim": _camera(width=-1)}, "sim.camera.width = -1"),
-    ({"sim": _camera(hfov_deg=0.0)}, "sim.camera.hfov_deg = 0.0"),
-    ({"sim": {"camera": {"widht": 64}}}, "sim.camera.widht"),
-    ({"sim": 3}, "sim = 3: expected a SimConfig"),
-    ({"task": SimConfig()}, "task = SimConfig"),
-    ({"overrides": ["camera.width=64"]}, "unknown group"),
-    ({"overrides": "sim.camera.width=64"}, "overrides = 'sim.camera.width=64'"),
-])
+@pytest.mark.parametrize(
+    ("kw", "key"),
+    [
+        ({"task": TaskConfig(success_distance=-1.0)}, "task.success_distance = -1.0"),
+        ({"sim": _camera(min_depth=6.0, max_depth=5.0)}, "sim.camera.min_depth < sim.camera.max_depth"),
+        ({"sim": _camera(width=-1)}, "sim.camera.width = -1"),
+        ({"sim": _camera(hfov_deg=0.0)}, "sim.camera.hfov_deg = 0.0"),
+        ({"sim": {"camera": {"widht": 64}}}, "sim.camera.widht"),
+        ({"sim": 3}, "sim = 3: expected a SimConfig"),
+        ({"task": SimConfig()}, "task = SimConfig"),
+        ({"overrides": ["camera.width=64"]}, "unknown group"),
+        ({"overrides": "sim.camera.width=64"}, "overrides = 'sim.camera.width=64'"),
+    ],
+)
 def test_env_validates_its_configs_before_any_work(kw, key):
     with pytest.raises(ConfigError) as e:
         ObjectNavEnv(scene="no-such-scene", goal="couch", **kw)  # refused before the scene is looked up
@@ -167,12 +174,21 @@ def test_start_off_the_navigable_map_is_refused():
     with pytest.raises(ValueError, match=r"start \[1000.0, 0.0, 1000.0\] is not on the navigable map"):
         env.reset(seed=0)
     with pytest.raises(ValueError, match="start"):
-        env.reset(seed=0, options={"episode": EpisodeSpec("high", SCENE.scene_id, "couch",
-                                                          start_position=np.array([3.0, 50.0, 2.0]))})
+        env.reset(
+            seed=0,
+            options={
+                "episode": EpisodeSpec("high", SCENE.scene_id, "couch", start_position=np.array([3.0, 50.0, 2.0]))
+            },
+        )
     with pytest.raises(ValueError, match="start yaw = inf"):
-        env.reset(seed=0, options={"episode": EpisodeSpec("yaw", SCENE.scene_id, "couch",
-                                                          start_position=np.array([3.0, 0.0, 2.0]),
-                                                          start_yaw=math.inf)})
+        env.reset(
+            seed=0,
+            options={
+                "episode": EpisodeSpec(
+                    "yaw", SCENE.scene_id, "couch", start_position=np.array([3.0, 0.0, 2.0]), start_yaw=math.inf
+                )
+            },
+        )
     with pytest.raises(gym.error.ResetNeeded):  # a failed reset leaves no episode to step
         env.step(TURN_LEFT)
     env.close()
@@ -182,8 +198,9 @@ def test_start_off_the_navigable_map_is_refused():
     env.close()
 
 
-@pytest.mark.parametrize("start", [(math.nan, 0.0, 2.0, 0.0), (3.0, 0.0, 2.0, math.inf), (3.0, 0.0, 2.0),
-                                   ("3", 0, 2, 0), 5])
+@pytest.mark.parametrize(
+    "start", [(math.nan, 0.0, 2.0, 0.0), (3.0, 0.0, 2.0, math.inf), (3.0, 0.0, 2.0), ("3", 0, 2, 0), 5]
+)
 def test_start_that_is_not_four_finite_numbers_is_refused_at_construction(start):
     with pytest.raises(ValueError, match="start = .*expected 4 finite numbers") as e:
         make(start=start)
@@ -247,8 +264,11 @@ def test_vector_env_refuses_bad_construction_arguments_before_starting_workers()
     with pytest.raises(ConfigError, match="task.success_distance = -1.0"):
         make_vector_env(recipe, 2, workers=2)
     ok = EnvRecipe(sim=small_sim(), scene=SCENE, goal="couch")
-    for kw, key in (({"num_envs": 0}, "num_envs = 0"), ({"num_envs": 2, "workers": -1}, "workers = -1"),
-                    ({"num_envs": 2, "workers": 1.5}, "workers = 1.5")):
+    for kw, key in (
+        ({"num_envs": 0}, "num_envs = 0"),
+        ({"num_envs": 2, "workers": -1}, "workers = -1"),
+        ({"num_envs": 2, "workers": 1.5}, "workers = 1.5"),
+    ):
         with pytest.raises(ValueError, match=key) as e:
             make_vector_env(ok, **kw)
         one_line(e)

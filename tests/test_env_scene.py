@@ -77,12 +77,18 @@ def env():
     e.close()
 
 
-def run(env: ObjectNavEnv, start: tuple[float, float, float], yaw_deg: float, actions: list[int],
-        max_steps: int = 40) -> dict:
+def run(
+    env: ObjectNavEnv, start: tuple[float, float, float], yaw_deg: float, actions: list[int], max_steps: int = 40
+) -> dict:
     """Reset at a given pose and play `actions`; returns the final info (must end the episode)."""
     env.task_cfg = TaskConfig(max_steps=max_steps)
-    spec = EpisodeSpec("scripted", "couch-room", "couch", start_position=np.array(start, dtype=np.float64),
-                       start_yaw=math.radians(yaw_deg))
+    spec = EpisodeSpec(
+        "scripted",
+        "couch-room",
+        "couch",
+        start_position=np.array(start, dtype=np.float64),
+        start_yaw=math.radians(yaw_deg),
+    )
     env.reset(seed=0, options={"episode": spec})
     info: dict = {}
     for i, a in enumerate(actions):

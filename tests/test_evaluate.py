@@ -46,8 +46,25 @@ def test_random_agent_is_near_zero(tiny_dataset, tiny_scenes, tmp_path):
 def test_interrupted_run_resumes_to_the_same_summary(tiny_dataset, tiny_scenes, tmp_path):
     full = evaluate(cfg_for(tiny_dataset, tiny_scenes, "random", seeds=(0, 1)), tmp_path / "full", progress=False)
     run = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "ovon.cli.main", "evaluate", "--agent", "random", "--data", str(tiny_dataset),
-           "--scenes", str(tiny_scenes), "--seeds", "0,1", "--workers", "1", "--no-progress", "--out", str(run)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "ovon.cli.main",
+        "evaluate",
+        "--agent",
+        "random",
+        "--data",
+        str(tiny_dataset),
+        "--scenes",
+        str(tiny_scenes),
+        "--seeds",
+        "0,1",
+        "--workers",
+        "1",
+        "--no-progress",
+        "--out",
+        str(run),
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.time() + 120
     while time.time() < deadline:
@@ -82,8 +99,11 @@ def test_noise_spec_parsing_and_metrics_use_true_pose(tiny_dataset, tiny_scenes,
 
 
 def test_user_agent_by_module_path(tiny_dataset, tiny_scenes, tmp_path):
-    summary = evaluate(cfg_for(tiny_dataset, tiny_scenes, "tests.example_agent:TurnInPlaceAgent",
-                               splits=("val_unseen",), episodes=3), tmp_path / "user", progress=False)
+    summary = evaluate(
+        cfg_for(tiny_dataset, tiny_scenes, "tests.example_agent:TurnInPlaceAgent", splits=("val_unseen",), episodes=3),
+        tmp_path / "user",
+        progress=False,
+    )
     assert summary["splits"]["val_unseen"]["episodes"] == 3
     with pytest.raises(ValueError, match="unknown agent"):
         evaluate(cfg_for(tiny_dataset, tiny_scenes, "nope", episodes=1), tmp_path / "bad", progress=False)
@@ -99,19 +119,35 @@ def write_release_fixture(root: Path) -> tuple[Path, Path]:
     with gzip.open(data / "val_seen" / "val_seen.json.gz", "wt") as f:
         json.dump({"episodes": [], "category_to_task_category_id": {"couch": 0}}, f)
     episode = {
-        "episode_id": "0", "scene_id": "hm3d/val/00001-FixtureScn01/FixtureScn01.basis.glb",
+        "episode_id": "0",
+        "scene_id": "hm3d/val/00001-FixtureScn01/FixtureScn01.basis.glb",
         "scene_dataset_config": "./data/scene_datasets/hm3d/hm3d_annotated_basis.scene_dataset_config.json",
-        "additional_obj_config_paths": [], "start_position": [2.3, 0.0, 2.3],
-        "start_rotation": [0.0, 0.0, 0.0, 1.0], "info": {"geodesic_distance": 2.55, "euclidean_distance": 2.55},
-        "goals": [], "start_room": None, "shortest_paths": None, "object_category": "couch",
+        "additional_obj_config_paths": [],
+        "start_position": [2.3, 0.0, 2.3],
+        "start_rotation": [0.0, 0.0, 0.0, 1.0],
+        "info": {"geodesic_distance": 2.55, "euclidean_distance": 2.55},
+        "goals": [],
+        "start_room": None,
+        "shortest_paths": None,
+        "object_category": "couch",
         "children_object_categories": [],
     }
-    goals = {"FixtureScn01.basis.glb_couch": [{
-        "object_category": "couch", "object_id": "couch_1", "object_name": "couch_1",
-        "position": [0.0, 0.4, 0.0], "radius": None, "room_id": None, "room_name": None,
-        "view_points": [{"agent_state": {"position": [0.0, 0.0, 1.2], "rotation": [0.0, 0.0, 0.0, 1.0]},
-                         "iou": 0.4}],
-    }]}
+    goals = {
+        "FixtureScn01.basis.glb_couch": [
+            {
+                "object_category": "couch",
+                "object_id": "couch_1",
+                "object_name": "couch_1",
+                "position": [0.0, 0.4, 0.0],
+                "radius": None,
+                "room_id": None,
+                "room_name": None,
+                "view_points": [
+                    {"agent_state": {"position": [0.0, 0.0, 1.2], "rotation": [0.0, 0.0, 0.0, 1.0]}, "iou": 0.4}
+                ],
+            }
+        ]
+    }
     with gzip.open(content / "FixtureScn01.json.gz", "wt") as f:
         json.dump({"episodes": [episode], "goals_by_category": goals}, f)
     (content / "._FixtureScn01.json.gz").write_bytes(b"\x00\x05\x16\x07 AppleDouble junk")
@@ -121,8 +157,11 @@ def write_release_fixture(root: Path) -> tuple[Path, Path]:
 def test_released_format_episode_runs_end_to_end(tmp_path):
     data, scenes = write_release_fixture(tmp_path)
     with pytest.warns(UserWarning, match="._FixtureScn01"):
-        summary = evaluate(EvalConfig(agent="shortest-path", data=str(data), scenes=str(scenes),
-                                      splits=("val_seen",)), tmp_path / "run", progress=False)
+        summary = evaluate(
+            EvalConfig(agent="shortest-path", data=str(data), scenes=str(scenes), splits=("val_seen",)),
+            tmp_path / "run",
+            progress=False,
+        )
     assert summary["splits"]["val_seen"]["episodes"] == 1
     (rec,) = read_records(tmp_path / "run")
     assert rec["success"] and rec["spl"] > 0.8
@@ -133,9 +172,29 @@ def test_released_format_episode_runs_end_to_end(tmp_path):
 
 def test_cli_evaluate_report_and_video(tiny_dataset, tiny_scenes, tmp_path, capsys):
     run = tmp_path / "cli_sp"
-    assert ovon(["evaluate", "--agent", "shortest-path", "--data", str(tiny_dataset), "--scenes", str(tiny_scenes),
-                 "--splits", "val_seen,val_unseen", "--episodes", "3", "--workers", "1", "--no-progress",
-                 "--out", str(run)]) == 0
+    assert (
+        ovon(
+            [
+                "evaluate",
+                "--agent",
+                "shortest-path",
+                "--data",
+                str(tiny_dataset),
+                "--scenes",
+                str(tiny_scenes),
+                "--splits",
+                "val_seen,val_unseen",
+                "--episodes",
+                "3",
+                "--workers",
+                "1",
+                "--no-progress",
+                "--out",
+                str(run),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "| shortest-path |" in out and "val_unseen SR" in out
     assert (run / "summary.json").exists() and (run / "table.md").exists()
@@ -143,8 +202,24 @@ def test_cli_evaluate_report_and_video(tiny_dataset, tiny_scenes, tmp_path, caps
     for name in ("report.md", "sr_vs_distance.png", "failures_shortest-path.png", "sr_per_category_shortest-path.png"):
         assert (tmp_path / "rep" / name).stat().st_size > 0
     ep = read_records(run)[0]
-    assert ovon(["video", "--run", str(run), "--episode", ep["episode_id"], "--split", ep["split"],
-                 "--scene", Path(ep["scene"]).parent.name, "--out", str(tmp_path / "ep.mp4")]) == 0
+    assert (
+        ovon(
+            [
+                "video",
+                "--run",
+                str(run),
+                "--episode",
+                ep["episode_id"],
+                "--split",
+                ep["split"],
+                "--scene",
+                Path(ep["scene"]).parent.name,
+                "--out",
+                str(tmp_path / "ep.mp4"),
+            ]
+        )
+        == 0
+    )
     import imageio.v2 as imageio
 
     n_frames = sum(1 for _ in imageio.get_reader(tmp_path / "ep.mp4"))

@@ -103,7 +103,7 @@ def test_cells_shared_between_experiments_are_one_run_folder(tmp_path: Path) -> 
 def test_every_table_entry_has_the_papers_numbers_and_they_satisfy_its_findings() -> None:
     for exp in all_experiments():
         evals = {}
-        for row in (exp.table.rows if exp.table else ()):
+        for row in exp.table.rows if exp.table else ():
             for name in {row.eval, *row.evals.values()} - {""}:
                 evals[name] = {"summary": None, "status": "missing", "setup": ""}
         for fig in exp.figures:
@@ -156,10 +156,17 @@ def test_redo_takes_what_depends_on_a_cell_and_never_a_users_dataset(tmp_path: P
     plan = resolve([load_experiment("main")], "cpu", tmp_path)
     result = run(plan, redo_cells=["train:bc"], dry_run=True, console=quiet())
     assert sorted(c for c, s in result.statuses.items() if s.state == "redo") == [
-        "eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
+        "eval:bc",
+        "eval:bcrl",
+        "train:bc",
+        "train:bcrl",
+    ]
     # what the cascade would move aside must also run: --only leaving it out is refused, before any work
-    with pytest.raises(DefinitionError, match=r"--redo train:bc also recomputes train:bcrl, eval:bc, eval:bcrl .*fix: "
-                                              r"add them to --only"):
+    with pytest.raises(
+        DefinitionError,
+        match=r"--redo train:bc also recomputes train:bcrl, eval:bc, eval:bcrl .*fix: "
+        r"add them to --only",
+    ):
         run(plan, only=["train:bc"], redo_cells=["train:bc"], dry_run=True, console=quiet())
     both = run(plan, only=["eval:bc", "eval:bcrl"], redo_cells=["train:bc"], dry_run=True, console=quiet())
     assert both.statuses["eval:bcrl"].state == "redo"
@@ -186,9 +193,11 @@ BAD = {
 def test_bad_definitions_fail_with_one_line(case: str, tmp_path: Path) -> None:
     train, expected = BAD[case]
     splits = "[val_test]" if case == "bad split" else "[val_seen]"
-    text = (f"title: t\n{train}evaluate: {{e: {{agent: policy, checkpoint: x, splits: {splits}}}}}\n"
-            "table: {caption: c, columns: [{name: v, split: val_seen}], rows: [{name: r, eval: e, paper: {v: [1, null, "
-            "1, null]}}]}\n")
+    text = (
+        f"title: t\n{train}evaluate: {{e: {{agent: policy, checkpoint: x, splits: {splits}}}}}\n"
+        "table: {caption: c, columns: [{name: v, split: val_seen}], rows: [{name: r, eval: e, paper: {v: [1, null, "
+        "1, null]}}]}\n"
+    )
     with pytest.raises(DefinitionError) as err:
         resolve([load_experiment(str(_write(tmp_path / "bad.yaml", text)))], "cpu", tmp_path)
     msg = str(err.value)
@@ -196,8 +205,9 @@ def test_bad_definitions_fail_with_one_line(case: str, tmp_path: Path) -> None:
 
 
 def test_missing_paper_numbers_and_bad_references_are_refused(tmp_path: Path) -> None:
-    base = ("title: t\ntable: {caption: c, columns: [{name: v, split: val_seen}], "
-            "rows: [{name: DAgRL, eval: dagrl%s}]}\n")
+    base = (
+        "title: t\ntable: {caption: c, columns: [{name: v, split: val_seen}], rows: [{name: DAgRL, eval: dagrl%s}]}\n"
+    )
     with pytest.raises(DefinitionError, match="no paper numbers"):
         resolve([load_experiment(str(_write(tmp_path / "a.yaml", base % "")))], "cpu", tmp_path)
     ok = base % ", paper: {v: [1, null, 1, null]}"
@@ -217,8 +227,23 @@ def test_cli_dry_run_prints_each_cells_status_and_command(tmp_path: Path) -> Non
 
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert main(["experiment", "run", "main", "--scale", "paper", "--root", str(tmp_path), "--dry-run",
-                     "--shard", "0/2"]) == 0
+        assert (
+            main(
+                [
+                    "experiment",
+                    "run",
+                    "main",
+                    "--scale",
+                    "paper",
+                    "--root",
+                    str(tmp_path),
+                    "--dry-run",
+                    "--shard",
+                    "0/2",
+                ]
+            )
+            == 0
+        )
     text = out.getvalue()
     assert "torchrun --standalone --nproc-per-node 8 -m ovon.cli.main train --algo" in text
     assert "data:data" in text and "missing" in text
@@ -265,8 +290,20 @@ def _alive(pid: int) -> bool:
 def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path: Path) -> None:
     exp_file = _write(tmp_path / "tiny_exp.yaml", TINY)
     root = tmp_path / "root"
-    cmd = [sys.executable, "-m", "ovon.cli.main", "experiment", "run", str(exp_file), "--scale", "tiny", "--root",
-           str(root), "--no-report", *(a for s in TINY_SET for a in ("--set", s))]
+    cmd = [
+        sys.executable,
+        "-m",
+        "ovon.cli.main",
+        "experiment",
+        "run",
+        str(exp_file),
+        "--scale",
+        "tiny",
+        "--root",
+        str(root),
+        "--no-report",
+        *(a for s in TINY_SET for a in ("--set", s)),
+    ]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     deadline = time.time() + 400
     try:
@@ -309,7 +346,9 @@ def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path
     again = run(plan, console=quiet())  # everything finished: nothing runs
     assert again.ran == [] and again.ok
     assert {c: _record(root, c).get("attempts") for c in ("eval:t-dagger", "eval:t-ft")} == {
-        "eval:t-dagger": 1, "eval:t-ft": 1}
+        "eval:t-dagger": 1,
+        "eval:t-ft": 1,
+    }
 
     report = build_report(plan, tmp_path / "report")
     data = json.loads((tmp_path / "report" / "report.json").read_text())
@@ -360,8 +399,9 @@ def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path
 
     # a changed definition is refused before any work, with the fix
     with pytest.raises(DefinitionError, match="--redo"):
-        run(resolve([load_experiment(str(exp_file))], "tiny", root, [*TINY_SET, "data.train_scenes=2"]),
-            console=quiet())
+        run(
+            resolve([load_experiment(str(exp_file))], "tiny", root, [*TINY_SET, "data.train_scenes=2"]), console=quiet()
+        )
 
 
 RESUME = """
@@ -388,11 +428,27 @@ def test_a_training_cell_killed_after_update_k_continues_to_the_same_weights(tmp
 
     exp_file = _write(tmp_path / "resume_exp.yaml", RESUME)
     root = tmp_path / "root"
-    args = ["experiment", "run", str(exp_file), "--scale", "tiny", "--root", str(root), "--no-report", "--only",
-            "train:r-ppo", *(a for s in TINY_SET for a in ("--set", s))]
+    args = [
+        "experiment",
+        "run",
+        str(exp_file),
+        "--scale",
+        "tiny",
+        "--root",
+        str(root),
+        "--no-report",
+        "--only",
+        "train:r-ppo",
+        *(a for s in TINY_SET for a in ("--set", s)),
+    ]
     folder = root / "tiny" / "train" / "r-ppo"
-    proc = subprocess.Popen([sys.executable, "-m", "ovon.cli.main", *args], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ovon.cli.main", *args],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
     deadline = time.time() + 400
     try:
         while time.time() < deadline:
@@ -432,9 +488,12 @@ def test_a_training_cell_killed_after_update_k_continues_to_the_same_weights(tmp
 
     # the same cell never interrupted (another root, reading the first one's data)
     data = root / "tiny" / "data"
-    straight = resolve([load_experiment(str(exp_file))], "tiny", tmp_path / "straight",
-                       [*TINY_SET, "data.source=paths", f"data.episodes={data / 'episodes'}",
-                        f"data.scenes={data / 'scenes'}"])
+    straight = resolve(
+        [load_experiment(str(exp_file))],
+        "tiny",
+        tmp_path / "straight",
+        [*TINY_SET, "data.source=paths", f"data.episodes={data / 'episodes'}", f"data.scenes={data / 'scenes'}"],
+    )
     assert run(straight, only=["train:r-ppo"], write_report=False, console=quiet()).ran == ["train:r-ppo"]
     assert _record(tmp_path / "straight", "train:r-ppo")["attempts"] == 1
     a = ActorCritic.load(folder / "policy.pt").state_dict()
@@ -461,7 +520,9 @@ def test_a_finished_training_cell_trains_further_when_its_budget_grows(tmp_path:
     longer = plan(root, 5)
     statuses = run(longer, dry_run=True, console=quiet()).statuses
     assert (statuses["train:r-ppo"].state, statuses["train:r-ppo"].detail) == (
-        "partial", "to extend: --set max_updates=3 -> --set max_updates=5")
+        "partial",
+        "to extend: --set max_updates=3 -> --set max_updates=5",
+    )
     assert statuses["eval:r-ppo"].state == "changed" and "train:r-ppo, which it reads" in statuses["eval:r-ppo"].detail
     with pytest.raises(DefinitionError, match="fix: --redo eval:r-ppo recomputes"):
         run(longer, write_report=False, console=quiet())
@@ -471,8 +532,13 @@ def test_a_finished_training_cell_trains_further_when_its_budget_grows(tmp_path:
     assert last_update(folder) == 5 and _record(root, "train:r-ppo")["attempts"] == 2
     assert "--resume" in (root / "tiny" / "logs" / "train-r-ppo.log").read_text()
     data = root / "tiny" / "data"
-    straight = plan(tmp_path / "straight", 5, "data.source=paths", f"data.episodes={data / 'episodes'}",
-                    f"data.scenes={data / 'scenes'}")
+    straight = plan(
+        tmp_path / "straight",
+        5,
+        "data.source=paths",
+        f"data.episodes={data / 'episodes'}",
+        f"data.scenes={data / 'scenes'}",
+    )
     assert run(straight, only=["train:r-ppo"], write_report=False, console=quiet()).ran == ["train:r-ppo"]
     a = ActorCritic.load(folder / "policy.pt").state_dict()
     b = ActorCritic.load(tmp_path / "straight" / "tiny" / "train" / "r-ppo" / "policy.pt").state_dict()
@@ -503,10 +569,12 @@ def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:
     cell = plan.cells["train:dagger"]
     lock = cell_lock(plan, cell)
     assert lock is not None
-    code = ("import sys; from pathlib import Path; from ovon.experiments import resolve, load_experiment;"
-            "from ovon.experiments.state import cell_lock;"
-            f"p = resolve([load_experiment('main')], 'cpu', Path({str(tmp_path)!r}));"
-            "sys.exit(0 if cell_lock(p, p.cells['train:dagger']) is None else 1)")
+    code = (
+        "import sys; from pathlib import Path; from ovon.experiments import resolve, load_experiment;"
+        "from ovon.experiments.state import cell_lock;"
+        f"p = resolve([load_experiment('main')], 'cpu', Path({str(tmp_path)!r}));"
+        "sys.exit(0 if cell_lock(p, p.cells['train:dagger']) is None else 1)"
+    )
     assert subprocess.run([sys.executable, "-c", code], cwd=ROOT).returncode == 0
     assert f"pid {os.getpid()}" in lock_holder(plan, cell)
     assert cell_status(plan, cell, {}).state == "running"

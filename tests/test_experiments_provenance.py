@@ -129,8 +129,12 @@ def test_records_from_before_tokens_and_configs_stay_done_and_the_runner_says_so
     assert text.count("ran before ovon recorded resolved configs (train:dagger)") == 1
     assert re.search(r"^train:dagger +done \(1.0 min\)$", text, re.M)
     # an old record whose command differs names the real difference, not the form of its paths
-    _done(plan, "train:dagger", identity=[c.replace("--expert frontier", "--expert shortest-path") for c in old],
-          config=...)
+    _done(
+        plan,
+        "train:dagger",
+        identity=[c.replace("--expert frontier", "--expert shortest-path") for c in old],
+        config=...,
+    )
     assert cell_status(plan, cell, {}).detail == (
         "the definition changed since it ran: --expert shortest-path -> --expert frontier"
     )
@@ -263,7 +267,9 @@ def test_what_reads_a_changed_cell_is_changed_too(tmp_path, tiny_dataset, tiny_s
     now = run(_plan(root, tiny_dataset, tiny_scenes), dry_run=True, console=quiet).statuses
     assert now["train:dagger"].state == "changed" and now["train:dagrl"].state == "changed"
     assert (now["eval:dagrl-od"].state, now["eval:dagrl-od"].detail) == (
-        "changed", "train:dagrl, which it reads, changed since it ran")
+        "changed",
+        "train:dagrl, which it reads, changed since it ran",
+    )
 
 
 def test_a_cells_command_compares_without_set_order_or_data_workers() -> None:
@@ -281,8 +287,12 @@ def test_a_cells_command_compares_without_set_order_or_data_workers() -> None:
     assert same_commands(["ovon dataset generate --set a=1 --workers 1 --set b=2 --out $ROOT/x"], None, data, now(gen))
     assert not same_commands(["ovon dataset generate --set a=1 --set b=3 --out $ROOT/x"], None, data, now(gen))
     assert not same_commands(["ovon train --set a=1 --set a=2"], None, train, now("ovon train --set a=2 --set a=1"))
-    assert same_commands(["ovon train --set b=1 --agent-arg x=1 --set a=2"], None, train,
-                         now("ovon train --set a=2 --set b=1 --agent-arg x=1"))
+    assert same_commands(
+        ["ovon train --set b=1 --agent-arg x=1 --set a=2"],
+        None,
+        train,
+        now("ovon train --set a=2 --set b=1 --agent-arg x=1"),
+    )
     assert not same_commands(["ovon evaluate --workers 1"], None, train, now("ovon evaluate --workers 2"))
 
 
@@ -332,14 +342,18 @@ def test_an_episode_file_edited_to_the_same_size_makes_finished_cells_stale(tmp_
     os.utime(victim, ns=(victim.stat().st_atime_ns, victim.stat().st_mtime_ns + 1))
     assert state.episodes_content_fingerprint(plan) != before  # a new mtime: read again
 
+
 def test_a_cell_whose_code_changed_while_it_ran_ran_with_both(tmp_path, monkeypatch) -> None:
     """The code is read when an attempt starts and when it ends: a tree edited meanwhile, or a new untracked
     module in the package, is not "a clean tree"."""
     import ovon
     from ovon.experiments.provenance import attempt_codes, code_version
 
-    record = {"code": "ovon 0.1.0 (abc1234)", "code_end": "ovon 0.1.0 (abc1234+dirty)",
-              "history": [{"code": "ovon 0.1.0 (abc1234)", "code_end": "ovon 0.1.0 (abc1234+dirty)"}]}
+    record = {
+        "code": "ovon 0.1.0 (abc1234)",
+        "code_end": "ovon 0.1.0 (abc1234+dirty)",
+        "history": [{"code": "ovon 0.1.0 (abc1234)", "code_end": "ovon 0.1.0 (abc1234+dirty)"}],
+    }
     assert attempt_codes(record) == ["ovon 0.1.0 (abc1234)", "ovon 0.1.0 (abc1234+dirty)"]
     repo = tmp_path / "repo"
     (repo / "pkg").mkdir(parents=True)
@@ -347,10 +361,20 @@ def test_a_cell_whose_code_changed_while_it_ran_ran_with_both(tmp_path, monkeypa
 
     def git(*a: str) -> None:
         # the user's git config (commit signing, hooks) must not decide this test
-        subprocess.run(["git", "-C", str(repo), "-c", "commit.gpgsign=false", "-c", "core.hooksPath=/dev/null", *a],
-                       check=True, capture_output=True,
-                       env={**os.environ, "GIT_AUTHOR_NAME": "t", "GIT_AUTHOR_EMAIL": "t@t", "GIT_COMMITTER_NAME": "t",
-                            "GIT_COMMITTER_EMAIL": "t@t", "GIT_CONFIG_GLOBAL": os.devnull, "GIT_CONFIG_NOSYSTEM": "1"})
+        subprocess.run(
+            ["git", "-C", str(repo), "-c", "commit.gpgsign=false", "-c", "core.hooksPath=/dev/null", *a],
+            check=True,
+            capture_output=True,
+            env={
+                **os.environ,
+                "GIT_AUTHOR_NAME": "t",
+                "GIT_AUTHOR_EMAIL": "t@t",
+                "GIT_COMMITTER_NAME": "t",
+                "GIT_COMMITTER_EMAIL": "t@t",
+                "GIT_CONFIG_GLOBAL": os.devnull,
+                "GIT_CONFIG_NOSYSTEM": "1",
+            },
+        )
 
     git("init", "-q")
     git("add", "-A")
@@ -368,11 +392,23 @@ def test_an_interrupted_cell_whose_input_changed_is_changed_not_failed(tmp_path,
     _done(plan, "train:dagrl")
     cell = plan.cells["eval:dagrl-od"]
     cell.folder.mkdir(parents=True)
-    write_record(plan, cell, {"kind": "eval", "name": cell.name, "state": "failed", "rc": "interrupted",
-                              "identity": identity(plan, cell), "config": resolved_config(plan, cell),
-                              "inputs": inputs(plan, cell)})
-    statuses = {"data:data": cell_status(plan, plan.cells["data:data"], {}),
-                "train:dagrl": cell_status(plan, plan.cells["train:dagrl"], {})}
+    write_record(
+        plan,
+        cell,
+        {
+            "kind": "eval",
+            "name": cell.name,
+            "state": "failed",
+            "rc": "interrupted",
+            "identity": identity(plan, cell),
+            "config": resolved_config(plan, cell),
+            "inputs": inputs(plan, cell),
+        },
+    )
+    statuses = {
+        "data:data": cell_status(plan, plan.cells["data:data"], {}),
+        "train:dagrl": cell_status(plan, plan.cells["train:dagrl"], {}),
+    }
     assert cell_status(plan, cell, statuses).state == "failed"
     (plan.cells["train:dagrl"].folder / "policy.pt").write_text('{"retrained": 1}')
     st = cell_status(plan, cell, statuses)

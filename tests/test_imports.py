@@ -151,10 +151,9 @@ def test_sim_does_not_import_the_task_layer():
 
 def test_every_module_imports_alone_in_any_order():
     names = [m for m in _modules() if not m.endswith("__main__")]
-    script = ("import importlib, sys\n"
-              "for n in sys.argv[1:]:\n"
-              "    importlib.import_module(n)\n")
+    script = "import importlib, sys\nfor n in sys.argv[1:]:\n    importlib.import_module(n)\n"
     for order in (names, names[::-1]):
-        r = subprocess.run([sys.executable, "-c", script, *order], cwd=ROOT, capture_output=True, text=True,
-                           timeout=300)
+        r = subprocess.run(
+            [sys.executable, "-c", script, *order], cwd=ROOT, capture_output=True, text=True, timeout=300
+        )
         assert r.returncode == 0, r.stderr[-2000:]

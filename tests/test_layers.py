@@ -15,23 +15,35 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-CONTRACT = ("atomic | config | geometry | lru | parallel | plugins -> runfolder -> scenes -> sim -> maps -> "
-            "experts | models | task -> dataset | env -> agents -> evaluate | train -> reports -> experiments -> cli")
+CONTRACT = (
+    "atomic | config | geometry | lru | parallel | plugins -> runfolder -> scenes -> sim -> maps -> "
+    "experts | models | task -> dataset | env -> agents -> evaluate | train -> reports -> experiments -> cli"
+)
 
 # Declared edges against the line (importer module -> imported module), each with its reason. A declared
 # edge that no longer exists fails the test too, so the list never outlives the code.
 EXCEPTIONS = {
-    ("ovon.experiments.plan", "ovon.cli.main"):
-        "validation parses each cell's command line with the real `ovon` parser, so a definition that "
-        "resolves is one the command accepts",
-    ("ovon.experiments.runner", "ovon.cli.main"):
-        "the runner executes cells as `python -m ovon.cli.main ...` child processes (not an import)",
-    ("ovon.experiments.state", "ovon.cli.dataset"):
-        "a data cell's resolved GenerationConfig is what its command line resolves to in `ovon dataset generate`",
-    ("ovon.experiments.state", "ovon.cli.evaluate"):
-        "an evaluation cell's resolved EvalConfig is what its command line resolves to in `ovon evaluate`",
-    ("ovon.train.folder", "ovon.evaluate.harness"):
-        "`EpisodeSource.load` reads a dataset split with `load_specs`, the one reader of a split's episodes",
+    (
+        "ovon.experiments.plan",
+        "ovon.cli.main",
+    ): "validation parses each cell's command line with the real `ovon` parser, so a definition that "
+    "resolves is one the command accepts",
+    (
+        "ovon.experiments.runner",
+        "ovon.cli.main",
+    ): "the runner executes cells as `python -m ovon.cli.main ...` child processes (not an import)",
+    (
+        "ovon.experiments.state",
+        "ovon.cli.dataset",
+    ): "a data cell's resolved GenerationConfig is what its command line resolves to in `ovon dataset generate`",
+    (
+        "ovon.experiments.state",
+        "ovon.cli.evaluate",
+    ): "an evaluation cell's resolved EvalConfig is what its command line resolves to in `ovon evaluate`",
+    (
+        "ovon.train.folder",
+        "ovon.evaluate.harness",
+    ): "`EpisodeSource.load` reads a dataset split with `load_specs`, the one reader of a split's episodes",
 }
 
 _MODULE_STRING = re.compile(r"^ovon(?:\.\w+)+(?::[\w.]+)?$")
@@ -120,8 +132,11 @@ def test_every_package_is_placed_exactly_once() -> None:
     layers = parse_contract(CONTRACT)
     names = [p for layer in layers for p in layer]
     assert len(names) == len(set(names))
-    on_disk = {p.stem if p.suffix == ".py" else p.name for p in (ROOT / "ovon").iterdir()
-               if (p.suffix == ".py" and p.name != "__init__.py") or (p / "__init__.py").exists()}
+    on_disk = {
+        p.stem if p.suffix == ".py" else p.name
+        for p in (ROOT / "ovon").iterdir()
+        if (p.suffix == ".py" and p.name != "__init__.py") or (p / "__init__.py").exists()
+    }
     on_disk |= {p.name for p in (ROOT / "ovon").iterdir() if p.is_dir() and any(p.glob("*.py"))}
     assert on_disk == set(names), (sorted(on_disk - set(names)), sorted(set(names) - on_disk))
 

@@ -34,8 +34,9 @@ def env():
 
 
 def couch_episode(start=START, yaw=math.pi / 2) -> EpisodeSpec:
-    return EpisodeSpec("couch-1", "two-rooms", "couch", start_position=np.array(start, dtype=np.float64),
-                       start_yaw=yaw, split="test")
+    return EpisodeSpec(
+        "couch-1", "two-rooms", "couch", start_position=np.array(start, dtype=np.float64), start_yaw=yaw, split="test"
+    )
 
 
 class Recording:
@@ -76,8 +77,9 @@ def test_vlfm_does_not_stop_at_the_sofa_with_a_perfect_detector_but_can_with_a_n
     spec = couch_episode(start=(6.0, 0.0, 2.0), yaw=0.0 - math.pi)  # facing +z, the sofa
     ok = run_episode(env, VLFMAgent(**{"value.scorer.kind": "constant"}), spec, seed=0)
     assert ok["success"]
-    fooled = VLFMAgent(**{"value.scorer.kind": "constant", "detector.fp_rate": 1.0, "detector.fp_min_similarity": 0.5,
-                          "spin_steps": 0})
+    fooled = VLFMAgent(
+        **{"value.scorer.kind": "constant", "detector.fp_rate": 1.0, "detector.fp_min_similarity": 0.5, "spin_steps": 0}
+    )
     rec = run_episode(env, fooled, spec, seed=0)
     assert not rec["success"] and rec["failure"] == "stop_wrong_object"
 
@@ -225,8 +227,11 @@ def test_navigator_settles_when_no_step_gets_inside_the_stop_radius():
     inside it, so after `settle_steps` steps without getting closer the agent STOPs where it is."""
     nav, maps = _navigator(settle_steps=5)
     goal = (0.0, -1.0)
-    ring = [(goal[0] + r * math.cos(a), goal[1] + r * math.sin(a))
-            for r in np.arange(0.0, 0.78, 0.02) for a in np.linspace(0, 2 * math.pi, 120)]
+    ring = [
+        (goal[0] + r * math.cos(a), goal[1] + r * math.sin(a))
+        for r in np.arange(0.0, 0.78, 0.02)
+        for a in np.linspace(0, 2 * math.pi, 120)
+    ]
     maps.add_obstacle_points(np.array(ring))
     pose = Pose2D(0.0, 0.0, 0.0)
     assert nav.final_approach(pose, goal) is None
@@ -304,13 +309,59 @@ def test_cli_evaluate_vlfm_and_report_row_names(tiny_dataset, tiny_scenes, tmp_p
     from ovon.cli.main import main as ovon
 
     run = tmp_path / "vlfm"
-    assert ovon(["evaluate", "--agent", "vlfm", "--data", str(tiny_dataset), "--scenes", str(tiny_scenes),
-                 "--splits", "val_seen", "--episodes", "2", "--workers", "1", "--no-progress",
-                 "--set", "task.max_steps=60", "--out", str(run)]) == 0
+    assert (
+        ovon(
+            [
+                "evaluate",
+                "--agent",
+                "vlfm",
+                "--data",
+                str(tiny_dataset),
+                "--scenes",
+                str(tiny_scenes),
+                "--splits",
+                "val_seen",
+                "--episodes",
+                "2",
+                "--workers",
+                "1",
+                "--no-progress",
+                "--set",
+                "task.max_steps=60",
+                "--out",
+                str(run),
+            ]
+        )
+        == 0
+    )
     noisy = tmp_path / "vlfm_noisy"
-    assert ovon(["evaluate", "--agent", "vlfm", "--data", str(tiny_dataset), "--scenes", str(tiny_scenes),
-                 "--splits", "val_seen", "--episodes", "2", "--workers", "1", "--no-progress",
-                 "--noise", "actuation,odometry", "--set", "task.max_steps=60", "--out", str(noisy)]) == 0
+    assert (
+        ovon(
+            [
+                "evaluate",
+                "--agent",
+                "vlfm",
+                "--data",
+                str(tiny_dataset),
+                "--scenes",
+                str(tiny_scenes),
+                "--splits",
+                "val_seen",
+                "--episodes",
+                "2",
+                "--workers",
+                "1",
+                "--no-progress",
+                "--noise",
+                "actuation,odometry",
+                "--set",
+                "task.max_steps=60",
+                "--out",
+                str(noisy),
+            ]
+        )
+        == 0
+    )
     assert ovon(["report", str(run), str(noisy), "--out", str(tmp_path / "rep")]) == 0
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "| VLFM, oracle detection, oracle-vl value |" in md
@@ -325,8 +376,16 @@ def test_cli_evaluate_vlfm_and_report_row_names(tiny_dataset, tiny_scenes, tmp_p
     from ovon.evaluate.results import read_records
 
     ep = read_records(run)[0]
-    where = ["--run", str(run), "--episode", ep["episode_id"], "--split", ep["split"], "--scene",
-             Path(ep["scene"]).parent.name]
+    where = [
+        "--run",
+        str(run),
+        "--episode",
+        ep["episode_id"],
+        "--split",
+        ep["split"],
+        "--scene",
+        Path(ep["scene"]).parent.name,
+    ]
     assert ovon(["video", *where, "--out", str(tmp_path / "beliefs.mp4")]) == 0
     assert ovon(["video", *where, "--no-agent-view", "--out", str(tmp_path / "truth.mp4")]) == 0
     with_view = imageio.get_reader(tmp_path / "beliefs.mp4").get_data(0)
@@ -339,8 +398,16 @@ def test_cli_evaluate_vlfm_and_report_row_names(tiny_dataset, tiny_scenes, tmp_p
     assert first["actions"][3] == TURN_LEFT
     first["actions"][3] = TURN_RIGHT
     (run / "episodes.jsonl").write_text("\n".join([json.dumps(first, sort_keys=True), *lines[1:]]) + "\n")
-    where = ["--run", str(run), "--episode", first["episode_id"], "--split", first["split"], "--scene",
-             Path(first["scene"]).parent.name]
+    where = [
+        "--run",
+        str(run),
+        "--episode",
+        first["episode_id"],
+        "--split",
+        first["split"],
+        "--scene",
+        Path(first["scene"]).parent.name,
+    ]
     assert ovon(["video", *where, "--out", str(tmp_path / "edited.mp4")]) == 0
     assert "chose another action than the record after step 3" in capsys.readouterr().err
 
@@ -353,8 +420,26 @@ def test_demo_runs_the_vlfm_row(tmp_path):
     from ovon.cli.main import main as ovon
 
     root = tmp_path / "demo"
-    assert ovon(["demo", "--root", str(root), "--train-scenes", "1", "--val-scenes", "1", "--episodes", "1",
-                 "--seeds", "0,1", "--workers", "1"]) == 0
+    assert (
+        ovon(
+            [
+                "demo",
+                "--root",
+                str(root),
+                "--train-scenes",
+                "1",
+                "--val-scenes",
+                "1",
+                "--episodes",
+                "1",
+                "--seeds",
+                "0,1",
+                "--workers",
+                "1",
+            ]
+        )
+        == 0
+    )
     md = (root / "runs" / "report" / "report.md").read_text()
     assert "| VLFM, oracle detection, oracle-vl value |" in md
     seeds = {a: json.loads((root / "runs" / a / "run.json").read_text())["seeds"] for a in ("random", "vlfm")}

@@ -117,19 +117,52 @@ def tiny_owlv2(tmp_path_factory) -> str:
     from transformers import CLIPTokenizer, Owlv2Config, Owlv2ForObjectDetection, Owlv2ImageProcessorPil
 
     d = tmp_path_factory.mktemp("owlv2")
-    words = ["!", "a</w>", "photo</w>", "of</w>", "couch</w>", "chair</w>", "c", "o", "u", "h", "a", "i", "r",
-             "p", "t", "f", "</w>", "<|startoftext|>", "<|endoftext|>"]
+    words = [
+        "!",
+        "a</w>",
+        "photo</w>",
+        "of</w>",
+        "couch</w>",
+        "chair</w>",
+        "c",
+        "o",
+        "u",
+        "h",
+        "a",
+        "i",
+        "r",
+        "p",
+        "t",
+        "f",
+        "</w>",
+        "<|startoftext|>",
+        "<|endoftext|>",
+    ]
     vocab = {w: i for i, w in enumerate(words)}
     (d / "vocab.json").write_text(json.dumps(vocab))
     (d / "merges.txt").write_text("#version: 0.2\n")
     tok = CLIPTokenizer(str(d / "vocab.json"), str(d / "merges.txt"))
     n = len(vocab)
     cfg = Owlv2Config(
-        text_config=dict(vocab_size=n, hidden_size=32, intermediate_size=37, num_hidden_layers=2,
-                         num_attention_heads=4, max_position_embeddings=16, bos_token_id=n - 2,
-                         eos_token_id=n - 1, pad_token_id=n - 1),
-        vision_config=dict(hidden_size=32, intermediate_size=37, num_hidden_layers=2, num_attention_heads=4,
-                           image_size=32, patch_size=8),
+        text_config=dict(
+            vocab_size=n,
+            hidden_size=32,
+            intermediate_size=37,
+            num_hidden_layers=2,
+            num_attention_heads=4,
+            max_position_embeddings=16,
+            bos_token_id=n - 2,
+            eos_token_id=n - 1,
+            pad_token_id=n - 1,
+        ),
+        vision_config=dict(
+            hidden_size=32,
+            intermediate_size=37,
+            num_hidden_layers=2,
+            num_attention_heads=4,
+            image_size=32,
+            patch_size=8,
+        ),
         projection_dim=32,
     )
     out = d / "model"

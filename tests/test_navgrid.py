@@ -164,8 +164,11 @@ def _other_keys(path):  # a readable npz that is not a grid cache (another versi
     np.savez(path.open("wb"), something=np.zeros(3))
 
 
-@pytest.mark.parametrize("damage", [_torn, lambda p: p.write_bytes(b""), lambda p: p.write_bytes(b"PK\x03\x04junk"),
-                                    _other_keys], ids=["torn", "empty", "garbage", "other-keys"])
+@pytest.mark.parametrize(
+    "damage",
+    [_torn, lambda p: p.write_bytes(b""), lambda p: p.write_bytes(b"PK\x03\x04junk"), _other_keys],
+    ids=["torn", "empty", "garbage", "other-keys"],
+)
 def test_a_corrupt_cache_file_is_a_miss_rebuilt_and_replaced(tmp_path, damage):
     scene = scene_from_boxes(room_boxes(0, 0, 4, 3), floor_heights=[0.0])
     clear_cache()
@@ -204,8 +207,16 @@ def test_two_processes_building_the_same_scene_at_once_both_succeed(tmp_path):
         "    sums.add(zlib.crc32(build_navigation(scene, cache_dir=sys.argv[2]).floors[0].navigable.tobytes()))\n"
         "print(sorted(sums))\n"
     )
-    procs = [subprocess.Popen([sys.executable, "-c", script, str(go), str(tmp_path / "nav")], cwd=root,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", script, str(go), str(tmp_path / "nav")],
+            cwd=root,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for _ in range(2)
+    ]
     go.touch()
     outs = [p.communicate(timeout=300) for p in procs]
     assert [p.returncode for p in procs] == [0, 0], [e[-2000:] for _, e in outs]
@@ -232,8 +243,12 @@ def test_table_top_and_box_interior_are_no_start_islands():
     boxes = room_boxes(0, 0, 8, 6, wall_height=3.0)
     boxes += [((1.0, 0.95, 1.0), (3.0, 1.0, 2.5))]  # a table top with head room: an elevated island
     # a closed box (a cupboard the agent fits in) whose interior is a small island at floor level
-    boxes += [((5.0, 0.0, 1.0), (7.0, 3.0, 1.1)), ((5.0, 0.0, 2.9), (7.0, 3.0, 3.0)),
-              ((5.0, 0.0, 1.1), (5.1, 3.0, 2.9)), ((6.9, 0.0, 1.1), (7.0, 3.0, 2.9))]
+    boxes += [
+        ((5.0, 0.0, 1.0), (7.0, 3.0, 1.1)),
+        ((5.0, 0.0, 2.9), (7.0, 3.0, 3.0)),
+        ((5.0, 0.0, 1.1), (5.1, 3.0, 2.9)),
+        ((6.9, 0.0, 1.1), (7.0, 3.0, 2.9)),
+    ]
     g = build_navigation(scene_from_boxes(boxes, floor_heights=[0.0])).floors[0]
     top, inside, main = _island_at(g, 2.0, 1.75), _island_at(g, 6.0, 2.0), _island_at(g, 4.0, 4.5)
     assert len({top, inside, main}) == 3 and min(top, inside, main) >= 0

@@ -227,6 +227,7 @@ def test_clone_is_an_independent_equal_copy(core: str) -> None:
         next(q.parameters()).add_(1.0)
     assert not torch.equal(p(obs, prev)[0], q(obs, prev)[0])
 
+
 def test_cnn_policy_owns_encoder(tmp_path) -> None:
     enc = dataclasses.replace(EncoderConfig(image="cnn"), cnn_dim=IMG, cnn_channels=(8, 8))
     p = build_policy(policy_preset("tiny"), IMG, TXT, enc)
@@ -293,8 +294,14 @@ def test_policy_agent_sampling_temperature(tmp_path) -> None:
         p.action_head.weight.normal_(0, 1.0)  # a peaked, input-dependent action distribution
     p.save(tmp_path / "p.pt", extra={"text_table": {"couch": torch.randn(TXT)}})
     rng = np.random.default_rng(0)
-    frames = [{"rgb": rng.integers(0, 255, (32, 32, 3), dtype=np.uint8),
-               "depth": rng.uniform(0.5, 5, (32, 32)).astype(np.float32), "goal": "couch"} for _ in range(8)]
+    frames = [
+        {
+            "rgb": rng.integers(0, 255, (32, 32, 3), dtype=np.uint8),
+            "depth": rng.uniform(0.5, 5, (32, 32)).astype(np.float32),
+            "goal": "couch",
+        }
+        for _ in range(8)
+    ]
 
     def run(agent, seed=0):
         agent.reset({"seed": seed})

@@ -39,8 +39,10 @@ from tests.remote_agents import free_ports
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 
-SMALL_DATASET = ("--set episodes_per_train_scene=4 --set episodes_per_val_split=6 "
-                 "--set viewpoints.render_size=48 --set viewpoints.max_viewpoints=4")
+SMALL_DATASET = (
+    "--set episodes_per_train_scene=4 --set episodes_per_val_split=6 "
+    "--set viewpoints.render_size=48 --set viewpoints.max_viewpoints=4"
+)
 SHRINK: list[tuple[str, str]] = [
     (r"(--split train --count )\d+", r"\g<1>1"),
     (r"(--split val --count )\d+", r"\g<1>2"),
@@ -93,8 +95,10 @@ def newcomer_env(cwd: Path) -> dict:
     """What `source .venv/bin/activate` gives in the repository root: the venv's bin first on PATH (so
     `python` and `ovon` are the venv's), VIRTUAL_ENV set, no PYTHONPATH; `cwd/.venv` links to the venv."""
     if not (VENV_BIN / "ovon").exists() or sys.prefix == sys.base_prefix:
-        pytest.fail(f"{sys.executable} is not a virtual environment with `ovon` installed; run the README test "
-                    "with the project's venv (`make install`, then `.venv/bin/pytest` or `make test-slow`)")
+        pytest.fail(
+            f"{sys.executable} is not a virtual environment with `ovon` installed; run the README test "
+            "with the project's venv (`make install`, then `.venv/bin/pytest` or `make test-slow`)"
+        )
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
     env["PATH"] = f"{VENV_BIN}{os.pathsep}{env.get('PATH', '')}"
     env["VIRTUAL_ENV"] = sys.prefix
@@ -104,12 +108,19 @@ def newcomer_env(cwd: Path) -> dict:
     link = cwd / ".venv"
     if not link.exists():
         link.symlink_to(sys.prefix, target_is_directory=True)
-    res = subprocess.run(["python", "-c", "import ovon; print(ovon.__file__)"], cwd=cwd, env=env,
-                         capture_output=True, text=True, timeout=120)
+    res = subprocess.run(
+        ["python", "-c", "import ovon; print(ovon.__file__)"],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     where = Path(res.stdout.strip() or "?").resolve()
     assert res.returncode == 0 and ROOT.resolve() in where.parents, (
         f"the venv's python imports ovon from {where}, not from this checkout {ROOT}: run `make install` here "
-        f"({res.stderr[-500:]})")
+        f"({res.stderr[-500:]})"
+    )
     return env
 
 
@@ -122,8 +133,9 @@ def _shell(code: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: float, ports: Ports,
-              saved_files: dict[Path, str]) -> None:
+def run_block(
+    lang: str, code: str, before: str, cwd: Path, env: dict, timeout: float, ports: Ports, saved_files: dict[Path, str]
+) -> None:
     """Run one README block (shrunk); `saved_files` (file -> README code) collects the "Save ... as" files.
     A failure with "Address already in use" (a port picked free was taken before the block's server bound
     it) gets the ports it names picked anew, the saved files rewritten with them, and one more run."""
@@ -136,12 +148,14 @@ def run_block(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: 
             path.write_text(shrink(original, ports))
         res = _run_block_once(lang, code, before, cwd, env, timeout, ports, saved_files)
     code = shrink(code, ports)
-    assert res.returncode == 0, f"README {lang} block failed:\n{code}\n--- stdout\n{res.stdout[-3000:]}\n" \
-                                f"--- stderr\n{res.stderr[-3000:]}"
+    assert res.returncode == 0, (
+        f"README {lang} block failed:\n{code}\n--- stdout\n{res.stdout[-3000:]}\n--- stderr\n{res.stderr[-3000:]}"
+    )
 
 
-def _run_block_once(lang: str, code: str, before: str, cwd: Path, env: dict, timeout: float, ports: Ports,
-                    saved_files: dict[Path, str]) -> subprocess.CompletedProcess:
+def _run_block_once(
+    lang: str, code: str, before: str, cwd: Path, env: dict, timeout: float, ports: Ports, saved_files: dict[Path, str]
+) -> subprocess.CompletedProcess:
     original, code = code, shrink(code, ports)
     if lang in ("python", "py"):
         saved = re.search(r"[Ss]ave the class below as\s+`([\w./-]+\.py)`", before)
@@ -152,8 +166,12 @@ def _run_block_once(lang: str, code: str, before: str, cwd: Path, env: dict, tim
         script.write_text(code)
         cmd = ["python", str(script)]  # the `python` on the newcomer's PATH (the venv's)
         if saved:
-            cmd = ["python", "-c", "import runpy, sys; runpy.run_path(sys.argv[1], run_name='readme_block')",
-                   str(script)]
+            cmd = [
+                "python",
+                "-c",
+                "import runpy, sys; runpy.run_path(sys.argv[1], run_name='readme_block')",
+                str(script),
+            ]
     elif lang in ("shell", "bash", "sh", "console"):
         script = cwd / "_block.sh"
         script.write_text(_shell(code))
@@ -161,8 +179,9 @@ def _run_block_once(lang: str, code: str, before: str, cwd: Path, env: dict, tim
     else:
         pytest.fail(f"README block in an unknown language {lang!r}: teach tests/test_readme.py to run it")
     # its own process group, killed whole on a timeout: a server started with `&` must not outlive it
-    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        cmd, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
@@ -198,8 +217,9 @@ def test_readme_python_env_example_runs(tmp_path):
     assert "gym.make" in head
     script = tmp_path / "env_example.py"
     script.write_text(head)
-    res = subprocess.run(["python", str(script)], cwd=tmp_path, env=newcomer_env(tmp_path), capture_output=True,
-                         text=True, timeout=300)
+    res = subprocess.run(
+        ["python", str(script)], cwd=tmp_path, env=newcomer_env(tmp_path), capture_output=True, text=True, timeout=300
+    )
     assert res.returncode == 0, res.stderr[-3000:]
 
 

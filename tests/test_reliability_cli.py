@@ -17,8 +17,19 @@ DEEP = "[" * 600 + "]" * 600
 
 
 def _eval(tiny_dataset, tiny_scenes, out, *extra):
-    return ["evaluate", "--agent", "random", "--data", str(tiny_dataset), "--scenes", str(tiny_scenes),
-            "--out", str(out), "--no-progress", *extra]
+    return [
+        "evaluate",
+        "--agent",
+        "random",
+        "--data",
+        str(tiny_dataset),
+        "--scenes",
+        str(tiny_scenes),
+        "--out",
+        str(out),
+        "--no-progress",
+        *extra,
+    ]
 
 
 EVAL_CASES = [  # (extra arguments, words the one line must contain)
@@ -60,13 +71,14 @@ EVAL_CASES = [  # (extra arguments, words the one line must contain)
 
 
 @pytest.mark.parametrize("extra,needles", EVAL_CASES, ids=[" ".join(c[0])[:40] for c in EVAL_CASES])
-def test_bad_evaluate_arguments_are_one_line_errors_before_any_work(tiny_dataset, tiny_scenes, tmp_path, capsys,
-                                                                    extra, needles):
+def test_bad_evaluate_arguments_are_one_line_errors_before_any_work(
+    tiny_dataset, tiny_scenes, tmp_path, capsys, extra, needles
+):
     out = tmp_path / "run"
     argv = _eval(tiny_dataset, tiny_scenes, out, *extra)
     if "--agent" in extra:  # the later --agent wins in argparse; keep one
         i = argv.index("--agent")
-        del argv[i:i + 2]
+        del argv[i : i + 2]
     rc, _, err = run(argv, capsys)
     refused(rc, err, *needles)
     assert not out.exists()  # refused before the run folder was touched
@@ -75,16 +87,18 @@ def test_bad_evaluate_arguments_are_one_line_errors_before_any_work(tiny_dataset
 def test_bad_checkpoints_and_outputs(tiny_dataset, tiny_scenes, tmp_path, capsys):
     garbage = tmp_path / "policy.pt"
     garbage.write_bytes(b"\x80\x04not a checkpoint")
-    rc, _, err = run(_eval(tiny_dataset, tiny_scenes, tmp_path / "r", "--checkpoint", str(garbage))
-                     + ["--agent", "policy"], capsys)
+    rc, _, err = run(
+        _eval(tiny_dataset, tiny_scenes, tmp_path / "r", "--checkpoint", str(garbage)) + ["--agent", "policy"], capsys
+    )
     one_line(rc, err, "--checkpoint", "not a checkpoint torch can read")
     truncated = tmp_path / "trunc.pt"
     import torch
 
     torch.save({"a": torch.zeros(1000)}, truncated)
     truncated.write_bytes(truncated.read_bytes()[:500])
-    rc, _, err = run(_eval(tiny_dataset, tiny_scenes, tmp_path / "r", "--checkpoint", str(truncated))
-                     + ["--agent", "policy"], capsys)
+    rc, _, err = run(
+        _eval(tiny_dataset, tiny_scenes, tmp_path / "r", "--checkpoint", str(truncated)) + ["--agent", "policy"], capsys
+    )
     one_line(rc, err, "--checkpoint")
     f = tmp_path / "afile"
     f.write_text("x")
@@ -107,24 +121,40 @@ def test_bad_dataset_command_arguments(tiny_dataset, tiny_scenes, tmp_path, caps
         rc, _, err = run(gen + extra, capsys)
         one_line(rc, err, *needles)
         assert not (tmp_path / "g").exists()
-    rc, _, err = run(["dataset", "generate", "--scenes", str(tmp_path / "nope"), "--out", str(tmp_path / "g")],
-                     capsys)
+    rc, _, err = run(["dataset", "generate", "--scenes", str(tmp_path / "nope"), "--out", str(tmp_path / "g")], capsys)
     one_line(rc, err, "--scenes")
     rc, _, err = run(["dataset", "validate", str(tmp_path / "nope"), "--scenes", str(tiny_scenes)], capsys)
     one_line(rc, err, "DATA")
-    rc, _, err = run(["dataset", "validate", str(tiny_dataset), "--scenes", str(tiny_scenes),
-                      "--max-episodes-per-scene", "0"], capsys)
+    rc, _, err = run(
+        ["dataset", "validate", str(tiny_dataset), "--scenes", str(tiny_scenes), "--max-episodes-per-scene", "0"],
+        capsys,
+    )
     one_line(rc, err, "--max-episodes-per-scene")
-    rc, _, err = run(["dataset", "splits", "--vocabulary", "--holdout", "1.5", "--out", str(tmp_path / "c.json")],
-                     capsys)
+    rc, _, err = run(
+        ["dataset", "splits", "--vocabulary", "--holdout", "1.5", "--out", str(tmp_path / "c.json")], capsys
+    )
     one_line(rc, err, "--holdout", "(0, 1)")
     rc, _, err = run(["dataset", "stats", str(tmp_path / "nope")], capsys)
     one_line(rc, err, "DATA")
 
 
 def test_dataset_generate_into_another_generation_is_refused(tiny_dataset, tiny_scenes, capsys):
-    rc, _, err = run(["dataset", "generate", "--scenes", str(tiny_scenes), "--out", str(tiny_dataset),
-                      "--preset", "fast", "--set", "seed=1", "--no-progress"], capsys)
+    rc, _, err = run(
+        [
+            "dataset",
+            "generate",
+            "--scenes",
+            str(tiny_scenes),
+            "--out",
+            str(tiny_dataset),
+            "--preset",
+            "fast",
+            "--set",
+            "seed=1",
+            "--no-progress",
+        ],
+        capsys,
+    )
     one_line(rc, err, "generation.seed 0 -> 1")
 
 
@@ -138,10 +168,24 @@ def test_argparse_errors_are_one_line(capsys):
 EPISODES = ["1", "2", "0", "-1", "", "x", "1e3", "2.0", "999999999999999999999"]
 SEEDS = ["0", "1", "0,1", "", ",", "0,0", "-1", "a", "1,,2", " 3 "]
 SPLITS = ["val_seen", "val_unseen", "val_seen,val_unseen", "", "val_seen,val_seen", "train", "x/../y", "val_nope"]
-SETS = ["task.max_steps=20", "task.max_steps=0", "task.success_distance=0.5", "task.success_distance=-1",
-        "sim.camera.width=32", "sim.camera.width=0", "sim.camera.hfov_deg=179", "sim.camera.hfov_deg=180",
-        "sim.agent.radius=0.2", "sim.agent.radius=0", "task.seen_fraction=2", "sim.noise.odometry=true",
-        "task.reward.kind=sparse", "task.reward.kind=x", "x=1", "sim.nav.cell_size=.nan"]
+SETS = [
+    "task.max_steps=20",
+    "task.max_steps=0",
+    "task.success_distance=0.5",
+    "task.success_distance=-1",
+    "sim.camera.width=32",
+    "sim.camera.width=0",
+    "sim.camera.hfov_deg=179",
+    "sim.camera.hfov_deg=180",
+    "sim.agent.radius=0.2",
+    "sim.agent.radius=0",
+    "task.seen_fraction=2",
+    "sim.noise.odometry=true",
+    "task.reward.kind=sparse",
+    "task.reward.kind=x",
+    "x=1",
+    "sim.nav.cell_size=.nan",
+]
 
 
 def _expect_ok(episodes: str, seeds: str, splits: str, sets: list[str]) -> bool:
@@ -160,23 +204,48 @@ def _expect_ok(episodes: str, seeds: str, splits: str, sets: list[str]) -> bool:
         return False
     if any(s not in ("val_seen", "val_seen_synonyms", "val_unseen") for s in split_list):
         return False
-    good = {"task.max_steps=20", "task.success_distance=0.5", "sim.camera.width=32", "sim.camera.hfov_deg=179",
-            "sim.agent.radius=0.2", "sim.noise.odometry=true", "task.reward.kind=sparse"}
+    good = {
+        "task.max_steps=20",
+        "task.success_distance=0.5",
+        "sim.camera.width=32",
+        "sim.camera.hfov_deg=179",
+        "sim.agent.radius=0.2",
+        "sim.noise.odometry=true",
+        "task.reward.kind=sparse",
+    }
     # a key set twice takes its last value (a bad value overridden later on the line is not an error)
     last = {s.split("=", 1)[0]: s for s in sets}
     return all(s in good for s in last.values())
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                  HealthCheck.too_slow])
-@given(episodes=st.sampled_from(EPISODES), seeds=st.sampled_from(SEEDS), splits=st.sampled_from(SPLITS),
-       sets=st.lists(st.sampled_from(SETS), max_size=2))
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
+@given(
+    episodes=st.sampled_from(EPISODES),
+    seeds=st.sampled_from(SEEDS),
+    splits=st.sampled_from(SPLITS),
+    sets=st.lists(st.sampled_from(SETS), max_size=2),
+)
 @example(episodes="1", seeds="0", splits="val_seen", sets=["task.success_distance=-1", "task.success_distance=0.5"])
 @example(episodes="1", seeds="0", splits="val_seen", sets=["task.success_distance=0.5", "task.success_distance=-1"])
 def test_fuzz_evaluate_arguments(tiny_dataset, tiny_scenes, tmp_path_factory, capsys, episodes, seeds, splits, sets):
     out = tmp_path_factory.mktemp("fuzz") / "run"
-    argv = _eval(tiny_dataset, tiny_scenes, out, "--episodes", episodes, "--seeds", seeds, "--splits", splits,
-                 "--workers", "1", "--set", "task.max_steps=20")
+    argv = _eval(
+        tiny_dataset,
+        tiny_scenes,
+        out,
+        "--episodes",
+        episodes,
+        "--seeds",
+        seeds,
+        "--splits",
+        splits,
+        "--workers",
+        "1",
+        "--set",
+        "task.max_steps=20",
+    )
     for s in sets:
         argv += ["--set", s]
     rc, stdout, err = run(argv, capsys)  # run() asserts: no traceback, no internal error
@@ -191,8 +260,10 @@ def test_fuzz_evaluate_arguments(tiny_dataset, tiny_scenes, tmp_path_factory, ca
         refused(rc, err)
 
 
-@pytest.mark.parametrize("args,needle", [(["--hfov", "180"], "--hfov = 180.0"), (["--width", "0"], "--width = 0"),
-                                         (["--hfov", "0"], "--hfov = 0.0")])
+@pytest.mark.parametrize(
+    "args,needle",
+    [(["--hfov", "180"], "--hfov = 180.0"), (["--width", "0"], "--width = 0"), (["--hfov", "0"], "--hfov = 0.0")],
+)
 def test_sim_camera_options_use_the_camera_domains(tmp_path, capsys, args, needle):
     from ovon.cli.main import main
 
@@ -206,8 +277,21 @@ def test_train_resume_from_a_torn_checkpoint_is_one_line(tmp_path, capsys):
     from ovon.cli.main import main
 
     out = tmp_path / "run"
-    args = ["train", "--algo", "dagger", "--preset", "tiny", "--procedural", "0", "--episodes", "2",
-            "--expert", "shortest-path", "--out", str(out)]
+    args = [
+        "train",
+        "--algo",
+        "dagger",
+        "--preset",
+        "tiny",
+        "--procedural",
+        "0",
+        "--episodes",
+        "2",
+        "--expert",
+        "shortest-path",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     ckpt = out / "checkpoint.pt"
     ckpt.write_bytes(ckpt.read_bytes()[: ckpt.stat().st_size // 2])

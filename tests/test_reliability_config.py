@@ -21,11 +21,21 @@ from ovon.train.config import TrainConfig
 # The configs whose domains this session owns (train/expert configs declare theirs with the same helpers).
 OWNED = (SimConfig, TaskConfig, GenerationConfig, EncoderConfig, PolicyConfig, EvalConfig, SplitConfig, TrainConfig)
 # Fields whose type is their whole domain: any finite reward, a free-form kwargs mapping.
-FREE = {"RewardConfig": {"dense_success", "dense_slack", "sparse_success", "sparse_slack", "sparse_collision",
-                         "dense_failed_stop", "dense_coverage"},
-        "EvalConfig": {"agent_kwargs"},
-        # paths that may not exist yet (written when absent)
-        "BCConfig": {"shards"}, "TrainConfig": {"text_cache"}}
+FREE = {
+    "RewardConfig": {
+        "dense_success",
+        "dense_slack",
+        "sparse_success",
+        "sparse_slack",
+        "sparse_collision",
+        "dense_failed_stop",
+        "dense_coverage",
+    },
+    "EvalConfig": {"agent_kwargs"},
+    # paths that may not exist yet (written when absent)
+    "BCConfig": {"shards"},
+    "TrainConfig": {"text_cache"},
+}
 
 
 def _tree(cls):
@@ -135,8 +145,11 @@ def test_override_syntax_errors_are_clear():
 
 
 def test_flagged_fields_name_their_option():
-    with pytest.raises(ConfigError, match=r"^--episodes = -1: expected an integer > 0, or leave it out; fix: pass "
-                                          r"--episodes"):
+    with pytest.raises(
+        ConfigError,
+        match=r"^--episodes = -1: expected an integer > 0, or leave it out; fix: pass "
+        r"--episodes",
+    ):
         from_dict(EvalConfig, {"episodes": -1, "data": ".", "scenes": "."})
     with pytest.raises(ConfigError, match=r"^--seeds = \(0, 0\): expected a non-empty list of distinct"):
         from_dict(EvalConfig, {"seeds": "0,0", "data": ".", "scenes": "."})
@@ -156,10 +169,29 @@ def _leaf_keys(cls, prefix=""):
 
 KEYS = sorted(set(_leaf_keys(SimConfig, "sim.")) | set(_leaf_keys(TaskConfig, "task.")))
 GEN_KEYS = sorted(_leaf_keys(GenerationConfig))
-values = st.one_of(st.integers(-10**6, 10**6).map(str), st.floats(allow_nan=True, allow_infinity=True).map(repr),
-                   st.sampled_from(["", "abc", "1e400", "-1e400", ".nan", "true", "[]", "[1, 2]", "{a: 1}", "null",
-                                    "0", "-0", "1,2,3", "[[[[1]]]]"]),
-                   st.text(max_size=12))
+values = st.one_of(
+    st.integers(-(10**6), 10**6).map(str),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.sampled_from(
+        [
+            "",
+            "abc",
+            "1e400",
+            "-1e400",
+            ".nan",
+            "true",
+            "[]",
+            "[1, 2]",
+            "{a: 1}",
+            "null",
+            "0",
+            "-0",
+            "1,2,3",
+            "[[[[1]]]]",
+        ]
+    ),
+    st.text(max_size=12),
+)
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])

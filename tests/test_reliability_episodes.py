@@ -113,8 +113,22 @@ def test_scene_ids_cannot_leave_the_scenes_root(data, tiny_scenes, scene_id, cap
     with pytest.raises(DatasetError, match="scenes root"):
         load_specs(str(data), str(tiny_scenes), "val_seen", None)
     assert not validate_dataset(data, tiny_scenes, ["val_seen"]).ok
-    rc = ovon(["evaluate", "--agent", "random", "--data", str(data), "--scenes", str(tiny_scenes), "--splits",
-               "val_seen", "--out", str(data.parent / "run"), "--no-progress"])
+    rc = ovon(
+        [
+            "evaluate",
+            "--agent",
+            "random",
+            "--data",
+            str(data),
+            "--scenes",
+            str(tiny_scenes),
+            "--splits",
+            "val_seen",
+            "--out",
+            str(data.parent / "run"),
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert rc == 2 and err.startswith("ovon: error:") and "scenes root" in err and len(err.splitlines()) == 1
 
@@ -128,8 +142,14 @@ def test_absolute_scene_ids_inside_the_root_still_load(data, tiny_scenes):
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.lists(st.sampled_from(["..", ".", "a", "b.glb", "", "/", "//", "\\", "data", "scene_datasets", "~",
-                                 "..a", "...", "a..", " "]), max_size=8).map("/".join))
+@given(
+    st.lists(
+        st.sampled_from(
+            ["..", ".", "a", "b.glb", "", "/", "//", "\\", "data", "scene_datasets", "~", "..a", "...", "a..", " "]
+        ),
+        max_size=8,
+    ).map("/".join)
+)
 def test_fuzz_resolved_scene_paths_stay_inside_the_root(tmp_path_factory, scene_id):
     root = Path("/srv/scenes")
     try:
@@ -150,9 +170,11 @@ def test_evaluate_with_bad_episodes_runs_only_the_good_ones(data, tiny_scenes, t
 
 
 # -- fuzz: any mutation of a shard is read or refused with a DatasetError; checks never raise ------------
-JSON = st.recursive(st.none() | st.booleans() | st.integers(-10**9, 10**9) | st.floats() | st.text(max_size=6),
-                    lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3),
-                    max_leaves=6)
+JSON = st.recursive(
+    st.none() | st.booleans() | st.integers(-(10**9), 10**9) | st.floats() | st.text(max_size=6),
+    lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=4), c, max_size=3),
+    max_leaves=6,
+)
 
 
 @settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -166,8 +166,9 @@ def _floating(d: dict) -> None:
     d["episodes"][1]["start_position"][1] += 0.6  # navigable x, z; 0.6 m above the floor
 
 
-def test_a_start_floating_above_its_floor_is_one_rule_for_validate_evaluate_and_the_env(data, tiny_scenes, tmp_path,
-                                                                                       capsys):
+def test_a_start_floating_above_its_floor_is_one_rule_for_validate_evaluate_and_the_env(
+    data, tiny_scenes, tmp_path, capsys
+):
     """The env refuses a start more than 0.5 m from its floor's surface; the off-map filter and `dataset
     validate` apply the same rule (`SceneNav.start_problem`), so such an episode is counted as skipped
     instead of failing the evaluation in the middle of its unit."""

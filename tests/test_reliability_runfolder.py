@@ -79,8 +79,10 @@ def test_second_writer_is_refused_and_the_lock_of_a_dead_process_is_recovered(tm
     run.close()
     RunFolder.open(tmp_path, "evaluate", {}).close()
     # a process that dies holding the lock (kill -9): its lock file stays, the next open takes it over
-    code = ("import sys, time; sys.path.insert(0, sys.argv[2]); from ovon.runfolder import RunFolder; "
-            "RunFolder.open(sys.argv[1], 'evaluate', {}); print('locked', flush=True); time.sleep(60)")
+    code = (
+        "import sys, time; sys.path.insert(0, sys.argv[2]); from ovon.runfolder import RunFolder; "
+        "RunFolder.open(sys.argv[1], 'evaluate', {}); print('locked', flush=True); time.sleep(60)"
+    )
     p = subprocess.Popen([sys.executable, "-c", code, str(tmp_path), str(ROOT)], stdout=subprocess.PIPE, text=True)
     assert p.stdout.readline().strip() == "locked"
     with pytest.raises(RunFolderError, match=f"pid {p.pid}"):
@@ -100,12 +102,14 @@ def test_temp_files_of_a_killed_write_are_swept(tmp_path):
 
 # -- evaluate ------------------------------------------------------------------------------------------
 def _cfg(tiny_dataset, tiny_scenes, **kw):
-    return EvalConfig(agent="random", data=str(tiny_dataset), scenes=str(tiny_scenes), splits=("val_seen",),
-                      episodes=4, **kw)
+    return EvalConfig(
+        agent="random", data=str(tiny_dataset), scenes=str(tiny_scenes), splits=("val_seen",), episodes=4, **kw
+    )
 
 
-def test_evaluate_refuses_another_agent_or_task_and_accepts_other_spellings(tiny_dataset, tiny_scenes, tmp_path,
-                                                                            monkeypatch):
+def test_evaluate_refuses_another_agent_or_task_and_accepts_other_spellings(
+    tiny_dataset, tiny_scenes, tmp_path, monkeypatch
+):
     out = tmp_path / "run"
     evaluate(_cfg(tiny_dataset, tiny_scenes), out, progress=False)
     n = len(read_records(out))
@@ -116,8 +120,9 @@ def test_evaluate_refuses_another_agent_or_task_and_accepts_other_spellings(tiny
         evaluate(replace(cfg, task=replace(cfg.task, max_steps=300)), out, progress=False)
     # the same scenes and data spelled differently, and more workers: the same run, nothing duplicated
     monkeypatch.chdir(tiny_scenes.parent)
-    spelled = replace(_cfg(tiny_dataset, tiny_scenes), scenes=f"./{tiny_scenes.name}/",
-                      data=str(tiny_dataset) + "/", workers=2)
+    spelled = replace(
+        _cfg(tiny_dataset, tiny_scenes), scenes=f"./{tiny_scenes.name}/", data=str(tiny_dataset) + "/", workers=2
+    )
     summary = evaluate(spelled, out, progress=False)
     assert len(read_records(out)) == n == summary["splits"]["val_seen"]["episodes"]
 
@@ -172,16 +177,34 @@ def _wait_for(condition, timeout_s: float) -> None:
 
 def test_two_evaluations_on_one_folder_do_not_both_write(tiny_dataset, tiny_scenes, tmp_path):
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "ovon.cli.main", "evaluate", "--agent", "tests.test_reliability_runfolder:GatedAgent",
-           "--data", str(tiny_dataset),
-           "--scenes", str(tiny_scenes), "--splits", "val_seen", "--episodes", "6", "--workers", "1", "--no-progress",
-           "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "ovon.cli.main",
+        "evaluate",
+        "--agent",
+        "tests.test_reliability_runfolder:GatedAgent",
+        "--data",
+        str(tiny_dataset),
+        "--scenes",
+        str(tiny_scenes),
+        "--splits",
+        "val_seen",
+        "--episodes",
+        "6",
+        "--workers",
+        "1",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
     gate = tmp_path / "gate"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     err = tmp_path / "first.err"  # a file, not a pipe: what the first run writes never blocks it
     with open(err, "w") as first_err:
-        first = subprocess.Popen(cmd, env={**env, GATE: str(gate)}, cwd=ROOT, stdout=subprocess.DEVNULL,
-                                 stderr=first_err)
+        first = subprocess.Popen(
+            cmd, env={**env, GATE: str(gate)}, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=first_err
+        )
     try:
         _wait_for(lambda: Path(f"{gate}.waiting").exists() or first.poll() is not None, 300)
         assert first.poll() is None and (out / LOCK_FILE).exists(), err.read_text()
@@ -198,9 +221,19 @@ def test_two_evaluations_on_one_folder_do_not_both_write(tiny_dataset, tiny_scen
 
 # -- canonical order: the summary does not depend on the order in which workers finished ----------------
 def _record(i: int, split: str, seed: int) -> dict:
-    return {"split": split, "seed": seed, "scene": f"/s/{i % 3}.glb", "episode_id": str(i), "success": i % 3 == 0,
-            "spl": (i * 0.1234567) % 1, "soft_spl": (i * 0.7654321) % 1, "distance_to_goal": i * 0.1,
-            "steps": i, "collisions": i % 5, "failure": None if i % 3 == 0 else "stop_too_far"}
+    return {
+        "split": split,
+        "seed": seed,
+        "scene": f"/s/{i % 3}.glb",
+        "episode_id": str(i),
+        "success": i % 3 == 0,
+        "spl": (i * 0.1234567) % 1,
+        "soft_spl": (i * 0.7654321) % 1,
+        "distance_to_goal": i * 0.1,
+        "steps": i,
+        "collisions": i % 5,
+        "failure": None if i % 3 == 0 else "stop_too_far",
+    }
 
 
 RECORDS = [_record(i, sp, seed) for i in range(30) for sp in ("val_seen", "val_unseen") for seed in (0, 1, 2)]

@@ -22,8 +22,9 @@ OUTPUTS = ("episodes.jsonl", "summary.json", "table.md", "run_identity.json")
 def _children(pid: int) -> list[int]:
     """The processes whose parent is `pid`: from /proc (slim Linux images have no pgrep), else pgrep (macOS)."""
     if not Path("/proc/self/stat").exists():
-        return sorted(int(x) for x in subprocess.run(["pgrep", "-P", str(pid)], capture_output=True,
-                                                     text=True).stdout.split())
+        return sorted(
+            int(x) for x in subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout.split()
+        )
     kids = []
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
@@ -139,8 +140,9 @@ def test_one_or_two_workers_give_byte_identical_files(tiny_dataset, tiny_scenes,
 def test_ray_gives_the_same_bytes(tiny_dataset, tiny_scenes, tmp_path):
     pytest.importorskip("ray")
     evaluate(_cfg(tiny_dataset, tiny_scenes, splits=("val_seen",)), tmp_path / "p", progress=False)
-    evaluate(_cfg(tiny_dataset, tiny_scenes, splits=("val_seen",), workers=2, executor="ray"), tmp_path / "r",
-             progress=False)
+    evaluate(
+        _cfg(tiny_dataset, tiny_scenes, splits=("val_seen",), workers=2, executor="ray"), tmp_path / "r", progress=False
+    )
     for name in OUTPUTS:
         assert (tmp_path / "p" / name).read_bytes() == (tmp_path / "r" / name).read_bytes(), name
 
@@ -180,9 +182,27 @@ def test_kill_9_during_evaluate_then_rerun_is_byte_identical(tiny_dataset, tiny_
     ref = tmp_path / "ref"
     evaluate(_cfg(tiny_dataset, tiny_scenes, seeds=(0, 1), splits=("val_seen",)), ref, progress=False)
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "ovon.cli.main", "evaluate", "--agent", "frontier", "--data", str(tiny_dataset),
-           "--scenes", str(tiny_scenes), "--splits", "val_seen", "--seeds", "0,1", "--workers", "2",
-           "--no-progress", "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "ovon.cli.main",
+        "evaluate",
+        "--agent",
+        "frontier",
+        "--data",
+        str(tiny_dataset),
+        "--scenes",
+        str(tiny_scenes),
+        "--splits",
+        "val_seen",
+        "--seeds",
+        "0,1",
+        "--workers",
+        "2",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
     rng = random.Random(13)
     n = records_on_disk(ref)
     workers = kill_and_resume(cmd, out, records_on_disk, sorted(rng.sample(range(1, n), 2)), _env())
@@ -194,12 +214,35 @@ def test_kill_9_during_evaluate_then_rerun_is_byte_identical(tiny_dataset, tiny_
 
 @pytest.mark.slow
 def test_kill_9_during_dataset_generate_then_rerun_is_byte_identical(tiny_scenes, tmp_path):
-    args = ["dataset", "generate", "--scenes", str(tiny_scenes), "--preset", "fast", "--split", "val_seen",
-            "--split", "val_unseen", "--set", "episodes_per_val_split=16", "--set", "viewpoints.render_size=48",
-            "--set", "viewpoints.max_viewpoints=6", "--workers", "2", "--no-progress"]
+    args = [
+        "dataset",
+        "generate",
+        "--scenes",
+        str(tiny_scenes),
+        "--preset",
+        "fast",
+        "--split",
+        "val_seen",
+        "--split",
+        "val_unseen",
+        "--set",
+        "episodes_per_val_split=16",
+        "--set",
+        "viewpoints.render_size=48",
+        "--set",
+        "viewpoints.max_viewpoints=6",
+        "--workers",
+        "2",
+        "--no-progress",
+    ]
     ref, out = tmp_path / "ref", tmp_path / "killed"
-    subprocess.run([sys.executable, "-m", "ovon.cli.main", *args, "--out", str(ref)], env=_env(), cwd=ROOT,
-                   check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, "-m", "ovon.cli.main", *args, "--out", str(ref)],
+        env=_env(),
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+    )
     rng = random.Random(7)
     cmd = [sys.executable, "-m", "ovon.cli.main", *args, "--out", str(out)]
     n = files_on_disk(ref)
@@ -207,8 +250,11 @@ def test_kill_9_during_dataset_generate_then_rerun_is_byte_identical(tiny_scenes
     assert _wait_gone(workers) == []
 
     def files(root: Path) -> dict[str, bytes]:  # the dataset (reports hold timings, .cache holds timings)
-        return {str(p.relative_to(root)): p.read_bytes() for p in root.rglob("*") if p.is_file()
-                and ".cache" not in p.parts and p.name != "generation_report.json"}
+        return {
+            str(p.relative_to(root)): p.read_bytes()
+            for p in root.rglob("*")
+            if p.is_file() and ".cache" not in p.parts and p.name != "generation_report.json"
+        }
 
     assert files(out) == files(ref)
 
@@ -225,10 +271,33 @@ def test_kill_9_during_train_then_resume_gives_the_same_losses(tmp_path):
     from ovon.train.logging import read_metrics
 
     def cmd(out: Path) -> list[str]:
-        return [sys.executable, "-m", "ovon.cli.main", "train", "--algo", "dagger", "--preset", "tiny",
-                "--expert", "shortest-path", "--procedural", "0-1", "--episodes", "6", "--resume",
-                "--set", "max_updates=6", "--set", "env_workers=2", "--set", "keep_checkpoints=10",
-                "--set", f"text_cache={tmp_path / 'text.pt'}", "--out", str(out)]
+        return [
+            sys.executable,
+            "-m",
+            "ovon.cli.main",
+            "train",
+            "--algo",
+            "dagger",
+            "--preset",
+            "tiny",
+            "--expert",
+            "shortest-path",
+            "--procedural",
+            "0-1",
+            "--episodes",
+            "6",
+            "--resume",
+            "--set",
+            "max_updates=6",
+            "--set",
+            "env_workers=2",
+            "--set",
+            "keep_checkpoints=10",
+            "--set",
+            f"text_cache={tmp_path / 'text.pt'}",
+            "--out",
+            str(out),
+        ]
 
     env = {**_env(), "OMP_NUM_THREADS": "1"}
     ref, out = tmp_path / "ref", tmp_path / "killed"
@@ -260,15 +329,45 @@ def test_sigterm_stops_train_after_its_update_with_a_checkpoint_and_the_same_com
     from ovon.train.logging import read_metrics
 
     def cmd(out: Path) -> list[str]:
-        return [sys.executable, "-m", "ovon.cli.main", "train", "--algo", "dagger", "--preset", "tiny",
-                "--expert", "shortest-path", "--procedural", "0-1", "--episodes", "6", "--resume",
-                "--set", "max_updates=40", "--set", "checkpoint_every=1000", "--set", "env_workers=2",
-                "--set", f"text_cache={tmp_path / 'text.pt'}", "--out", str(out)]
+        return [
+            sys.executable,
+            "-m",
+            "ovon.cli.main",
+            "train",
+            "--algo",
+            "dagger",
+            "--preset",
+            "tiny",
+            "--expert",
+            "shortest-path",
+            "--procedural",
+            "0-1",
+            "--episodes",
+            "6",
+            "--resume",
+            "--set",
+            "max_updates=40",
+            "--set",
+            "checkpoint_every=1000",
+            "--set",
+            "env_workers=2",
+            "--set",
+            f"text_cache={tmp_path / 'text.pt'}",
+            "--out",
+            str(out),
+        ]
 
     env = {**_env(), "OMP_NUM_THREADS": "1"}
     out, ref = tmp_path / "run", tmp_path / "ref"
-    p = subprocess.Popen(cmd(out), env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                         start_new_session=group)
+    p = subprocess.Popen(
+        cmd(out),
+        env=env,
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=group,
+    )
     deadline = time.time() + 600
     while p.poll() is None and len(read_metrics(out)) < 2 and time.time() < deadline:
         time.sleep(0.02)

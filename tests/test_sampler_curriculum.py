@@ -32,8 +32,9 @@ def _specs(with_distance: bool = True) -> list[EpisodeSpec]:
     for house in range(3):
         for k in range(20):
             info = {"geodesic_distance": 1.0 + 0.5 * k} if with_distance else {}
-            specs.append(EpisodeSpec(episode_id=f"{house}-{k}", scene=f"procedural:{house}", goal_category="bed",
-                                     info=info))
+            specs.append(
+                EpisodeSpec(episode_id=f"{house}-{k}", scene=f"procedural:{house}", goal_category="bed", info=info)
+            )
     return specs
 
 
@@ -49,8 +50,9 @@ def _run(sampler: EpisodeSampler, n: int) -> list[str]:
 
 
 def test_curriculum_starts_close_and_widens_to_every_episode() -> None:
-    sampler = EpisodeSampler(_Recorder(), _specs(), seed=0, scene_repeat=2, curriculum_start_m=2.0,
-                             curriculum_episodes=50)
+    sampler = EpisodeSampler(
+        _Recorder(), _specs(), seed=0, scene_repeat=2, curriculum_start_m=2.0, curriculum_episodes=50
+    )
     started = _run(sampler, 400)
     caps = [2.0 + i / 50 * (10.5 - 2.0) for i in range(50)]
     assert all(_distance(e) <= cap + 1e-9 for e, cap in zip(started[:50], caps))
@@ -61,16 +63,19 @@ def test_curriculum_starts_close_and_widens_to_every_episode() -> None:
 
 def test_without_curriculum_the_draws_are_unchanged() -> None:
     plain = _run(EpisodeSampler(_Recorder(), _specs(), seed=3, scene_repeat=2), 60)
-    off = _run(EpisodeSampler(_Recorder(), _specs(), seed=3, scene_repeat=2, curriculum_start_m=0.0,
-                              curriculum_episodes=50), 60)
+    off = _run(
+        EpisodeSampler(_Recorder(), _specs(), seed=3, scene_repeat=2, curriculum_start_m=0.0, curriculum_episodes=50),
+        60,
+    )
     assert plain == off
     assert max(_distance(e) for e in plain[:10]) > 3.5  # far starts from the beginning
 
 
 def test_curriculum_state_resumes_exactly() -> None:
     def make() -> EpisodeSampler:
-        return EpisodeSampler(_Recorder(), _specs(), seed=1, scene_repeat=3, curriculum_start_m=1.5,
-                              curriculum_episodes=40)
+        return EpisodeSampler(
+            _Recorder(), _specs(), seed=1, scene_repeat=3, curriculum_start_m=1.5, curriculum_episodes=40
+        )
 
     whole = _run(make(), 60)
     first = make()
@@ -86,8 +91,7 @@ def test_curriculum_state_resumes_exactly() -> None:
 
 def test_curriculum_needs_start_distances() -> None:
     with pytest.raises(ValueError, match="geodesic_distance.*episode '0-0'.*curriculum.start_m=0"):
-        EpisodeSampler(_Recorder(), _specs(with_distance=False), seed=0, curriculum_start_m=2.0,
-                       curriculum_episodes=10)
+        EpisodeSampler(_Recorder(), _specs(with_distance=False), seed=0, curriculum_start_m=2.0, curriculum_episodes=10)
 
 
 def test_curriculum_config_has_a_domain() -> None:

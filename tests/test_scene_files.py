@@ -112,12 +112,14 @@ def test_stage_and_scene_dataset_configs_give_the_up_axis(tmp_path: Path) -> Non
     folder = tmp_path / "stages"
     folder.mkdir()
     write_glb(to_z_up(_room_mesh()), folder / "zroom.glb")
-    (folder / "zroom.stage_config.json").write_text(json.dumps({"render_asset": "zroom.glb", "up": [0, 0, 1],
-                                                                 "front": [0, 1, 0]}))
+    (folder / "zroom.stage_config.json").write_text(
+        json.dumps({"render_asset": "zroom.glb", "up": [0, 0, 1], "front": [0, 1, 0]})
+    )
     assert _quiet_load(folder / "zroom.glb").floor_heights == pytest.approx([0.0], abs=1e-5)
     (folder / "zroom.stage_config.json").unlink()
-    (tmp_path / "d.scene_dataset_config.json").write_text(json.dumps(
-        {"stages": {"default_attributes": {"up": [0, 0, 1], "front": [0, 1, 0]}}}))
+    (tmp_path / "d.scene_dataset_config.json").write_text(
+        json.dumps({"stages": {"default_attributes": {"up": [0, 0, 1], "front": [0, 1, 0]}}})
+    )
     assert _quiet_load(folder / "zroom.glb").floor_heights == pytest.approx([0.0], abs=1e-5)
     with pytest.raises(ValueError, match="--up 'q'"):
         load_scene(folder / "zroom.glb", up="q")
@@ -156,8 +158,13 @@ def _basis_glb(path: Path, ktx2: bytes) -> None:
     doc["extensionsUsed"] = ["KHR_texture_basisu"]
     js = json.dumps(doc).encode()
     js += b" " * (-len(js) % 4)
-    path.write_bytes(struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(blob)) + struct.pack("<I4s", len(js), b"JSON")
-                     + js + struct.pack("<I4s", len(blob), b"BIN\x00") + bytes(blob))
+    path.write_bytes(
+        struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(blob))
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(blob), b"BIN\x00")
+        + bytes(blob)
+    )
 
 
 def test_basis_texture_is_decoded_and_rendered(tmp_path: Path) -> None:
@@ -166,8 +173,9 @@ def test_basis_texture_is_decoded_and_rendered(tmp_path: Path) -> None:
     scene = _quiet_load(tmp_path / "floor.basis.glb")
     tex = scene.mesh.texture
     assert tex is not None and tex.shape == (16, 16, 3)
-    assert (np.abs(tex[2, 2].astype(int) - (255, 0, 0)) < 8).all() and (np.abs(tex[13, 13].astype(int) -
-                                                                             (255, 255, 0)) < 8).all()
+    assert (np.abs(tex[2, 2].astype(int) - (255, 0, 0)) < 8).all() and (
+        np.abs(tex[13, 13].astype(int) - (255, 255, 0)) < 8
+    ).all()
     from ovon.config.sim import CameraConfig
     from ovon.sim.render import make_renderer
 
@@ -234,8 +242,13 @@ def _edit_glb(src: Path, dst: Path, edit) -> None:  # noqa: ANN001
     doc, blob = edit(g.doc, bytearray(g.bin))
     js = json.dumps(doc).encode()
     js += b" " * (-len(js) % 4)
-    dst.write_bytes(struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(blob)) + struct.pack("<I4s", len(js), b"JSON")
-                    + js + struct.pack("<I4s", len(blob), b"BIN\x00") + bytes(blob))
+    dst.write_bytes(
+        struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(blob))
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(blob), b"BIN\x00")
+        + bytes(blob)
+    )
 
 
 def test_corrupt_glb_contents(tmp_path: Path) -> None:
@@ -262,8 +275,12 @@ def test_corrupt_glb_contents(tmp_path: Path) -> None:
         del doc["accessors"]
         return doc, blob
 
-    for edit, needle in [(bad_index, "triangle index 99 is out of range"), (nan_vertex, "NaN or infinite"),
-                         (huge_count, "truncated or corrupt"), (missing_key, "corrupt glTF")]:
+    for edit, needle in [
+        (bad_index, "triangle index 99 is out of range"),
+        (nan_vertex, "NaN or infinite"),
+        (huge_count, "truncated or corrupt"),
+        (missing_key, "corrupt glTF"),
+    ]:
         dst = tmp_path / f"{edit.__name__}.glb"
         _edit_glb(src, dst, edit)
         with pytest.raises(SceneFileError) as e:

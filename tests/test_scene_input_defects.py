@@ -68,8 +68,13 @@ def _edited_glb(path: Path, edit: Callable[[dict], None], vertices: np.ndarray =
     edit(g.doc)
     js = json.dumps(g.doc).encode()
     js += b" " * (-len(js) % 4)
-    path.write_bytes(struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(g.bin)) + struct.pack("<I4s", len(js), b"JSON")
-                     + js + struct.pack("<I4s", len(g.bin), b"BIN\x00") + g.bin)
+    path.write_bytes(
+        struct.pack("<4sII", b"glTF", 2, 28 + len(js) + len(g.bin))
+        + struct.pack("<I4s", len(js), b"JSON")
+        + js
+        + struct.pack("<I4s", len(g.bin), b"BIN\x00")
+        + g.bin
+    )
     src.unlink()
     return path
 
@@ -137,8 +142,15 @@ def test_d8_mesh_in_millimetres_is_refused_before_the_grid(tmp_path: Path, capsy
     mm.write_bytes(encode_glb(QUAD * 1000, QUAD_FACES))
     with pytest.raises(SceneFileError) as e:
         load_scene(mm)
-    _one_line(e.value, "mm.glb", "4,000 x 4,000 m", f"max {MAX_SCENE_SPAN_M:g} m", "millimetres", "4.0 x 4.0 m",
-              "scale the mesh to metres")
+    _one_line(
+        e.value,
+        "mm.glb",
+        "4,000 x 4,000 m",
+        f"max {MAX_SCENE_SPAN_M:g} m",
+        "millimetres",
+        "4.0 x 4.0 m",
+        "scale the mesh to metres",
+    )
     _cli_error(["scenes", "inspect", str(mm), "--nav"], capsys, "mm.glb", "millimetres")
     _cli_error(["sim", "view", str(mm), "--out", str(tmp_path / "v.png")], capsys, "mm.glb", "millimetres")
     ok = tmp_path / "m.glb"
@@ -153,8 +165,9 @@ def test_d8_stray_vertices_are_told_apart_from_units(tmp_path: Path) -> None:
     faces = [[r * n + c, (r + 1) * n + c, r * n + c + 1] for r in range(n - 1) for c in range(n - 1)]
     far = np.array([[9000, 0, 0], [9001, 0, 0], [9000, 0, 1]], np.float32)
     path = tmp_path / "stray.glb"
-    path.write_bytes(encode_glb(np.concatenate([grid, far]), np.array(faces + [[len(grid), len(grid) + 2,
-                                                                                 len(grid) + 1]])))
+    path.write_bytes(
+        encode_glb(np.concatenate([grid, far]), np.array(faces + [[len(grid), len(grid) + 2, len(grid) + 1]]))
+    )
     with pytest.raises(SceneFileError) as e:
         load_scene(path)
     _one_line(e.value, "stray.glb", "3 stray vertices", "delete the stray geometry")
@@ -177,16 +190,31 @@ def test_d8_grid_frame_refuses_a_grid_beyond_its_cell_cap() -> None:
     ("name", "edit", "needles"),
     [
         ("nan_scale", lambda d: d["nodes"][0].update(scale=[1, float("nan"), 1]), ("node 0", "scale", "finite")),
-        ("nan_matrix", lambda d: d["nodes"][0].update(matrix=[1, 0, 0, 0] * 3 + [float("inf"), 0, 0, 1]),
-         ("node 0", "matrix", "finite")),
-        ("zero_matrix", lambda d: d["nodes"][0].update(matrix=[0] * 16), ("every node with a mesh", "node 0",
-                                                                         "singular")),
-        ("zero_scales", lambda d: d["nodes"][0].update(scale=[1, 0, 1]) or d["nodes"].append(
-            {"mesh": 0, "scale": [0, 0, 0], "name": "flat"}) or d["scenes"][0]["nodes"].append(1),
-         ("every node with a mesh", "singular")),
+        (
+            "nan_matrix",
+            lambda d: d["nodes"][0].update(matrix=[1, 0, 0, 0] * 3 + [float("inf"), 0, 0, 1]),
+            ("node 0", "matrix", "finite"),
+        ),
+        (
+            "zero_matrix",
+            lambda d: d["nodes"][0].update(matrix=[0] * 16),
+            ("every node with a mesh", "node 0", "singular"),
+        ),
+        (
+            "zero_scales",
+            lambda d: (
+                d["nodes"][0].update(scale=[1, 0, 1])
+                or d["nodes"].append({"mesh": 0, "scale": [0, 0, 0], "name": "flat"})
+                or d["scenes"][0]["nodes"].append(1)
+            ),
+            ("every node with a mesh", "singular"),
+        ),
         ("bad_rotation", lambda d: d["nodes"][0].update(rotation=[0, 0, 0, 3]), ("node 0", "unit quaternion")),
-        ("float_indices", lambda d: d["accessors"][1].update(componentType=5126),
-         ("mesh 0 primitive 0", "componentType 5126 (float)", "5125 (unsigned int)")),
+        (
+            "float_indices",
+            lambda d: d["accessors"][1].update(componentType=5126),
+            ("mesh 0 primitive 0", "componentType 5126 (float)", "5125 (unsigned int)"),
+        ),
     ],
 )
 def test_d9_gltf_node_transforms_and_index_types(tmp_path: Path, name: str, edit: Callable, needles: tuple) -> None:
@@ -213,14 +241,18 @@ def test_d9_transform_overflowing_float32_is_refused(tmp_path: Path) -> None:
 def test_d9_a_zero_scale_node_is_hidden_not_an_error(tmp_path: Path) -> None:
     """Exporters hide a node by scaling it to 0 (valid glTF): its mesh is skipped with a note, and the
     scene loads as without it; only a scene whose every mesh node is singular is refused (test above)."""
+
     def hide(d: dict) -> None:
         d["nodes"].append({"mesh": 0, "scale": [0, 0, 0], "translation": [50, 0, 50], "name": "hidden"})
         d["scenes"][0]["nodes"].append(1)
 
     plain = load_scene(_edited_glb(tmp_path / "plain.glb", lambda d: None))
     path = _edited_glb(tmp_path / "hidden.glb", hide)
-    with pytest.warns(UserWarning, match=r"skipped 1 node\(s\) with a singular \(zero-scale: hidden\) transform: "
-                                         r"node 1 \('hidden'\)"):
+    with pytest.warns(
+        UserWarning,
+        match=r"skipped 1 node\(s\) with a singular \(zero-scale: hidden\) transform: "
+        r"node 1 \('hidden'\)",
+    ):
         scene = load_scene(path)
     np.testing.assert_array_equal(scene.mesh.vertices, plain.mesh.vertices)
     np.testing.assert_array_equal(scene.mesh.faces, plain.mesh.faces)
@@ -228,8 +260,7 @@ def test_d9_a_zero_scale_node_is_hidden_not_an_error(tmp_path: Path) -> None:
 
 
 def test_d9_mm_to_m_node_scale_is_not_singular(tmp_path: Path) -> None:
-    path = _edited_glb(tmp_path / "scaled.glb", lambda d: d["nodes"][0].update(scale=[0.001] * 3),
-                       vertices=QUAD * 1000)
+    path = _edited_glb(tmp_path / "scaled.glb", lambda d: d["nodes"][0].update(scale=[0.001] * 3), vertices=QUAD * 1000)
     scene = load_scene(path)
     np.testing.assert_allclose(scene.mesh.bounds()[1], [4, 0, 4], atol=1e-5)
     assert preflight_scene(path)["visual"] == path

@@ -200,9 +200,7 @@ def test_dense_and_sparse_rewards():
     assert t.reward() == pytest.approx(1.0 - 0.01)
     t.update(np.array([3.0, 0, 0]), stop=True, collided=False)
     assert t.reward() == pytest.approx(2.5)
-    s = EpisodeTracker(
-        straight_line_field(3.0), frozenset({GOAL}), TaskConfig(reward=RewardConfig(kind="sparse"))
-    )
+    s = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL}), TaskConfig(reward=RewardConfig(kind="sparse")))
     s.reset(np.zeros(3))
     s.update(np.array([1.0, 0, 0]), stop=False, collided=False)
     assert s.reward() == pytest.approx(-0.001)
@@ -217,8 +215,9 @@ def test_where_the_episode_ended():
     walk(t, [1.0, 2.0], stop_at_end=True, frames=[frame({GOAL: 0.05}), frame()])
     m = t.metrics()
     assert m.goal_seen and not m.goal_in_view and m.distance_to_object is None
-    t = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL}), TaskConfig(),
-                       object_distance_fn=lambda p: abs(4.0 - float(p[0])))
+    t = EpisodeTracker(
+        straight_line_field(3.0), frozenset({GOAL}), TaskConfig(), object_distance_fn=lambda p: abs(4.0 - float(p[0]))
+    )
     t.reset(np.zeros(3))
     walk(t, [1.0, 2.0], stop_at_end=True, frames=[frame(), frame({GOAL: 0.05})])
     m = t.metrics()
@@ -275,8 +274,9 @@ def test_best_progress_pays_only_for_a_new_closest_distance():
         t.update(np.array([x, 0.0, 0.0]), stop=False, collided=False)
         got.append(t.reward())
     assert got == pytest.approx([0.5, 0.0, 0.0, 0.0, 0.5, 0.5])
-    delta = EpisodeTracker(straight_line_field(3.0), frozenset({GOAL}),
-                           TaskConfig(reward=RewardConfig(dense_slack=0.0)))
+    delta = EpisodeTracker(
+        straight_line_field(3.0), frozenset({GOAL}), TaskConfig(reward=RewardConfig(dense_slack=0.0))
+    )
     delta.reset(np.zeros(3))
     delta.update(np.array([0.5, 0.0, 0.0]), stop=False, collided=False)
     delta.update(np.array([0.25, 0.0, 0.0]), stop=False, collided=False)
@@ -299,25 +299,46 @@ def test_goal_viewpoints_on_another_floor_are_not_goals_on_the_start_floor():
     down, up = world.nav.floors
     rng = np.random.default_rng(0)
     start = down.random_point(rng)
-    far = next(p for p in (down.random_point(rng) for _ in range(500))
-               if 4.0 < distance_field(down, p[None]).distance(start) < 1e9)
+    far = next(
+        p
+        for p in (down.random_point(rng) for _ in range(500))
+        if 4.0 < distance_field(down, p[None]).distance(start) < 1e9
+    )
     above = start + np.array([0.3, up.height - down.height, 0.0])  # upstairs, over the start's neighbourhood
     assert world.nav.floor_index(above) == up.floor and down.is_navigable(above)
     cat = world.scene.objects[0].category
-    spec = EpisodeSpec("two-floors", world.scene.scene_id, cat, start_position=start, start_yaw=0.0,
-                       viewpoints=[GoalViewpoint(far, 0.0), GoalViewpoint(above, 0.0)])
+    spec = EpisodeSpec(
+        "two-floors",
+        world.scene.scene_id,
+        cat,
+        start_position=start,
+        start_yaw=0.0,
+        viewpoints=[GoalViewpoint(far, 0.0), GoalViewpoint(above, 0.0)],
+    )
     setup = prepare_episode(world, spec, np.random.default_rng(0), TaskConfig())
     expect = distance_field(down, far[None]).distance(start)
     assert abs(setup.goal_field.distance(start) - expect) < 1e-6 and expect > 4.0
     assert [tuple(v.position) for v in setup.viewpoints] == [tuple(far)]
-    only_up = EpisodeSpec("upstairs", world.scene.scene_id, cat, start_position=start, start_yaw=0.0,
-                          viewpoints=[GoalViewpoint(above, 0.0)])
+    only_up = EpisodeSpec(
+        "upstairs",
+        world.scene.scene_id,
+        cat,
+        start_position=start,
+        start_yaw=0.0,
+        viewpoints=[GoalViewpoint(above, 0.0)],
+    )
     with pytest.raises(ValueError, match="no goal viewpoint on the start's floor 0"):
         prepare_episode(world, only_up, np.random.default_rng(0), TaskConfig())
     # a goal on the start's floor that no path reaches is refused at reset, not after a whole episode
     rows, cols = np.nonzero(down.navigable & (down.islands != down.island_of(start)))  # another island
     island = np.asarray(down.cell_to_world(int(rows[0]), int(cols[0])))
-    cut_off = EpisodeSpec("island", world.scene.scene_id, cat, start_position=start, start_yaw=0.0,
-                          viewpoints=[GoalViewpoint(island, 0.0)])
+    cut_off = EpisodeSpec(
+        "island",
+        world.scene.scene_id,
+        cat,
+        start_position=start,
+        start_yaw=0.0,
+        viewpoints=[GoalViewpoint(island, 0.0)],
+    )
     with pytest.raises(ValueError, match="no goal viewpoint is reachable from the start"):
         prepare_episode(world, cut_off, np.random.default_rng(0), TaskConfig())

@@ -43,8 +43,9 @@ def table_path(tmp_path_factory, house_specs) -> str:
     return str(path)
 
 
-def write_synthetic_shards(folder: Path, episodes: int = 6, image_dim: int = 12, text_dim: int = 8,
-                           seed: int = 0) -> Path:
+def write_synthetic_shards(
+    folder: Path, episodes: int = 6, image_dim: int = 12, text_dim: int = 8, seed: int = 0
+) -> Path:
     """Random embeddings with a learnable rule (action = argmax of the first 6 image dims)."""
     rng = np.random.default_rng(seed)
     folder.mkdir(parents=True, exist_ok=True)
@@ -54,14 +55,24 @@ def write_synthetic_shards(folder: Path, episodes: int = 6, image_dim: int = 12,
         image = rng.standard_normal((n, image_dim)).astype(np.float16)
         action = image[:, :6].astype(np.float32).argmax(1)
         episode = np.repeat(np.arange(len(lengths)), lengths)
-        prev = np.concatenate([np.r_[-1, action[o:o + n_][:-1]]
-                               for o, n_ in zip(np.r_[0, np.cumsum(lengths)[:-1]], lengths)])
-        torch.save({"format": SHARD_FORMAT, "image": torch.from_numpy(image),
-                    "goal": torch.from_numpy(rng.standard_normal((len(lengths), text_dim)).astype(np.float32)),
-                    "goal_text": ["x"] * len(lengths), "episode": torch.from_numpy(episode),
-                    "prev_action": torch.from_numpy(prev).long(), "action": torch.from_numpy(action).long(),
-                    "lengths": torch.from_numpy(lengths).long(), "metrics": [{}] * len(lengths), "meta": {}},
-                   folder / f"shard_{s:05d}.pt")
+        prev = np.concatenate(
+            [np.r_[-1, action[o : o + n_][:-1]] for o, n_ in zip(np.r_[0, np.cumsum(lengths)[:-1]], lengths)]
+        )
+        torch.save(
+            {
+                "format": SHARD_FORMAT,
+                "image": torch.from_numpy(image),
+                "goal": torch.from_numpy(rng.standard_normal((len(lengths), text_dim)).astype(np.float32)),
+                "goal_text": ["x"] * len(lengths),
+                "episode": torch.from_numpy(episode),
+                "prev_action": torch.from_numpy(prev).long(),
+                "action": torch.from_numpy(action).long(),
+                "lengths": torch.from_numpy(lengths).long(),
+                "metrics": [{}] * len(lengths),
+                "meta": {},
+            },
+            folder / f"shard_{s:05d}.pt",
+        )
     return folder
 
 
@@ -127,8 +138,11 @@ def test_bfloat16_forward_stays_close_to_float32(core: str) -> None:
     assert low.dtype == torch.bfloat16
     assert torch.allclose(low.float(), ref, atol=0.05) and not torch.equal(low.float(), ref)
     (low.float().sum() + values.float().sum()).backward()
-    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in policy.parameters() if p.requires_grad
-               and p.grad is not None)
+    assert all(
+        p.grad is not None and torch.isfinite(p.grad).all()
+        for p in policy.parameters()
+        if p.requires_grad and p.grad is not None
+    )
 
 
 def test_make_obs_widens_float16_embeddings_exactly() -> None:
@@ -145,8 +159,20 @@ def test_make_obs_widens_float16_embeddings_exactly() -> None:
     assert ActorCritic.make_obs(image.double(), goal).dtype == torch.float64  # other dtypes: the image's, as before
 
 
-@pytest.mark.parametrize("algo", ["dagger", "dagger-aggregated", "dagger-context", "dagger-overlap", "dagger-frontier",
-                                  "dagger-bf16", "dagger-bf16-overlap", "dagger-bf16-lstm-overlap", "ppo"])
+@pytest.mark.parametrize(
+    "algo",
+    [
+        "dagger",
+        "dagger-aggregated",
+        "dagger-context",
+        "dagger-overlap",
+        "dagger-frontier",
+        "dagger-bf16",
+        "dagger-bf16-overlap",
+        "dagger-bf16-lstm-overlap",
+        "ppo",
+    ],
+)
 def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path: str, algo: str) -> None:
     """Envs replay their current episode, the acting memory, the DAgger buffer (with its chunks' context
     views) and every RNG are restored (with `dagger.overlap` also the acting copy and the learner's
@@ -161,36 +187,51 @@ def test_online_resume_reproduces_losses(tmp_path: Path, house_specs, table_path
         from ovon.experts.config import FrontierExpertConfig
 
         algo, expert = "dagger", "frontier"
-        extra = {"dagger": DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=4, buffer_rollouts=3, grad_steps=2,
-                                        sample_rollouts=2),
-                 "frontier_expert": FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5)}
+        extra = {
+            "dagger": DaggerConfig(
+                beta_start=1.0, beta_end=0.0, beta_updates=4, buffer_rollouts=3, grad_steps=2, sample_rollouts=2
+            ),
+            "frontier_expert": FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5),
+        }
     if algo == "dagger-aggregated":
         algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2)}
     if algo == "dagger-context":
-        algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=2, grad_steps=2, sample_rollouts=2,
-                                                        context_prefix=True)}
+        algo, extra = (
+            "dagger",
+            {"dagger": DaggerConfig(buffer_rollouts=2, grad_steps=2, sample_rollouts=2, context_prefix=True)},
+        )
     if algo == "dagger-bf16":  # autocast state is per thread and per process: a resume must re-enter it
-        algo, extra = "dagger", {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2),
-                                 "learn_dtype": "bfloat16"}
+        algo, extra = (
+            "dagger",
+            {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2), "learn_dtype": "bfloat16"},
+        )
     if algo in ("dagger-bf16-overlap", "dagger-bf16-lstm-overlap"):  # the learner thread enters autocast itself
         from ovon.models.config import PolicyConfig
 
         lstm = algo.endswith("lstm-overlap")  # with the LSTM's kept (h, c) too
         algo, n, split = "dagger", 7, 3
-        extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True,
-                                        context_prefix=True),
-                 "learn_dtype": "bfloat16", "checkpoint_every": 3}
+        extra = {
+            "dagger": DaggerConfig(
+                buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True, context_prefix=True
+            ),
+            "learn_dtype": "bfloat16",
+            "checkpoint_every": 3,
+        }
         if lstm:
-            extra["policy"] = PolicyConfig(core="lstm", hidden=32, layers=1, heads=2, mlp=64, context=16,
-                                           prev_action_dim=8)
+            extra["policy"] = PolicyConfig(
+                core="lstm", hidden=32, layers=1, heads=2, mlp=64, context=16, prev_action_dim=8
+            )
     if algo == "dagger-overlap":
         algo, n, split = "dagger", 7, 3
-        extra = {"dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True),
-                 "checkpoint_every": 3}
+        extra = {
+            "dagger": DaggerConfig(buffer_rollouts=3, grad_steps=2, sample_rollouts=2, overlap=True),
+            "checkpoint_every": 3,
+        }
     if algo == "ppo":  # a PPO minibatch holds whole envs: one env, one minibatch
         extra = {"ppo": PPOConfig(minibatches=1)}
-    cfg = train_preset("tiny", algo=algo, expert=expert, num_envs=1, rollout_steps=6,
-                       max_updates=n, text_cache=table_path, **extra)
+    cfg = train_preset(
+        "tiny", algo=algo, expert=expert, num_envs=1, rollout_steps=6, max_updates=n, text_cache=table_path, **extra
+    )
     train(cfg, house_specs, tmp_path / "straight")
     train(dataclasses.replace(cfg, max_updates=split), house_specs, tmp_path / "split")
     train(cfg, house_specs, tmp_path / "split", resume=True)
@@ -215,7 +256,6 @@ def test_atomic_checkpoint_leaves_no_temp(tmp_path: Path) -> None:
     set_rng_state(ck["ranks"][0]["rng"])
     assert torch.equal(torch.rand(3), x)
     assert [p.name for p in tmp_path.iterdir()] == ["checkpoint.pt"]
-
 
 
 def test_checkpoint_rng_states_restore_from_any_device(tmp_path: Path) -> None:
@@ -245,16 +285,23 @@ def test_to_device_moves_every_acting_state_kind() -> None:
     from ovon.models.transformer import KVState
     from ovon.train.checkpoint import to_device
 
-    kv = KVState(k=torch.zeros(1, 2, 1, 3, 4), v=torch.zeros(1, 2, 1, 3, 4), valid=torch.zeros(2, 3, dtype=torch.bool),
-                 pos=torch.arange(2), slot=2)
+    kv = KVState(
+        k=torch.zeros(1, 2, 1, 3, 4),
+        v=torch.zeros(1, 2, 1, 3, 4),
+        valid=torch.zeros(2, 3, dtype=torch.bool),
+        pos=torch.arange(2),
+        slot=2,
+    )
     Pair = namedtuple("Pair", "h c")
-    moved = to_device({"kv": kv, "lstm": (torch.ones(1), torch.ones(1)), "nt": Pair(torch.ones(1), 3), "n": [None]},
-                      "meta")
+    moved = to_device(
+        {"kv": kv, "lstm": (torch.ones(1), torch.ones(1)), "nt": Pair(torch.ones(1), 3), "n": [None]}, "meta"
+    )
     assert isinstance(moved["kv"], KVState) and moved["kv"].slot == 2
     assert all(t.is_meta for t in (moved["kv"].k, moved["kv"].v, moved["kv"].valid, moved["kv"].pos))
     assert isinstance(moved["lstm"], tuple) and all(t.is_meta for t in moved["lstm"])
     assert isinstance(moved["nt"], Pair) and moved["nt"].h.is_meta and moved["nt"].c == 3
     assert moved["n"] == [None] and not kv.k.is_meta  # the original is untouched
+
 
 def test_cuda_rng_states_of_more_gpus_than_this_machine_has(monkeypatch) -> None:
     """A checkpoint holds one CUDA generator state per GPU the saving process saw; resuming where fewer
@@ -268,6 +315,7 @@ def test_cuda_rng_states_of_more_gpus_than_this_machine_has(monkeypatch) -> None
     monkeypatch.setattr(torch.cuda, "set_rng_state_all", lambda states: got.extend(states))
     set_rng_state(state)
     assert len(got) == 1 and torch.equal(got[0], torch.zeros(8, dtype=torch.uint8))
+
 
 def test_a_rank_without_its_gpu_is_refused_in_one_line(monkeypatch) -> None:
     from ovon.config.base import ConfigError
@@ -292,21 +340,62 @@ def test_cli_train_on_a_missing_gpu_is_refused(tmp_path: Path, table_path: str, 
 
     if torch.cuda.is_available():
         pytest.skip("this machine has a GPU")
-    rc, _, err = run(["train", "--algo", "dagger", "--preset", "tiny", "--expert", "shortest-path", "--procedural",
-                      "0", "--episodes", "3", "--set", f"text_cache={table_path}", "--set", "device=cuda",
-                      "--out", str(tmp_path / "run")], capsys)
+    rc, _, err = run(
+        [
+            "train",
+            "--algo",
+            "dagger",
+            "--preset",
+            "tiny",
+            "--expert",
+            "shortest-path",
+            "--procedural",
+            "0",
+            "--episodes",
+            "3",
+            "--set",
+            f"text_cache={table_path}",
+            "--set",
+            "device=cuda",
+            "--out",
+            str(tmp_path / "run"),
+        ],
+        capsys,
+    )
     one_line(rc, err, "device = cuda", "no GPU")
     assert not (tmp_path / "run").exists()
+
 
 # ----- distributed ------------------------------------------------------------------------------------
 def test_torchrun_two_ranks_stay_in_sync(tmp_path: Path) -> None:
     shards = write_synthetic_shards(tmp_path / "shards", episodes=8)
     out = tmp_path / "run"
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
-           "-m", "ovon.cli.main", "train", "--algo", "bc", "--preset", "tiny", "--out", str(out),
-           "--set", f"bc.shards={shards}", "--set", "max_updates=3", "--set", "bc.batch_chunks=2",
-           "--set", "device=cpu"]  # gloo on any machine (a one-GPU machine refuses two ranks with device=auto)
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--standalone",
+        "--nproc_per_node",
+        "2",
+        "-m",
+        "ovon.cli.main",
+        "train",
+        "--algo",
+        "bc",
+        "--preset",
+        "tiny",
+        "--out",
+        str(out),
+        "--set",
+        f"bc.shards={shards}",
+        "--set",
+        "max_updates=3",
+        "--set",
+        "bc.batch_chunks=2",
+        "--set",
+        "device=cpu",
+    ]  # gloo on any machine (a one-GPU machine refuses two ranks with device=auto)
     r = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True, timeout=300)
     if r.returncode != 0 and any(s in r.stderr for s in ("EADDRINUSE", "address already in use", "bind")):
         pytest.skip(f"cannot bind a rendezvous port: {r.stderr[-300:]}")
@@ -325,11 +414,20 @@ def test_bc_overfits_recorded_expert_episodes(tmp_path: Path, house_specs, table
     from ovon.train import train
     from ovon.train.bc import load_shards
 
-    cfg = train_preset("tiny", algo="bc", expert="shortest-path", max_updates=300, checkpoint_every=1000,
-                       lr=3e-3, text_cache=table_path)
-    cfg = dataclasses.replace(cfg, bc=dataclasses.replace(cfg.bc, record_episodes=3, episodes_per_shard=2,
-                                                          batch_chunks=8),
-                              policy=dataclasses.replace(cfg.policy, context=64))  # whole episodes in context
+    cfg = train_preset(
+        "tiny",
+        algo="bc",
+        expert="shortest-path",
+        max_updates=300,
+        checkpoint_every=1000,
+        lr=3e-3,
+        text_cache=table_path,
+    )
+    cfg = dataclasses.replace(
+        cfg,
+        bc=dataclasses.replace(cfg.bc, record_episodes=3, episodes_per_shard=2, batch_chunks=8),
+        policy=dataclasses.replace(cfg.policy, context=64),
+    )  # whole episodes in context
     last = train(cfg, house_specs, tmp_path / "bc")
     data = load_shards(tmp_path / "bc" / "shards", cfg.policy.context)
     assert len(data.chunks) >= 3 and int(data.start.sum()) == 3
@@ -392,9 +490,15 @@ def test_train_envs_workers_match_in_process(house_specs, table_path: str) -> No
 
     cfg = train_preset("tiny", algo="dagger", expert="shortest-path", num_envs=2, text_cache=table_path)
     table = text_table(cfg.encoder, needed_texts(house_specs), table_path, write=False)
-    recipe = EnvRecipe(sim=cfg.sim, task=cfg.task, encoder=cfg.encoder,
-                       text_table={k: v.numpy() for k, v in table.items()}, expert=cfg.expert,
-                       expert_cfg=expert_config(cfg), scene_repeat=cfg.scene_repeat)
+    recipe = EnvRecipe(
+        sim=cfg.sim,
+        task=cfg.task,
+        encoder=cfg.encoder,
+        text_table={k: v.numpy() for k, v in table.items()},
+        expert=cfg.expert,
+        expert_cfg=expert_config(cfg),
+        scene_repeat=cfg.scene_repeat,
+    )
     runs = []
     for workers in (0, 2):
         envs = TrainEnvs(recipe, house_specs, 2, workers, base_seed=0)
@@ -422,8 +526,9 @@ def test_dagger_with_trainable_cnn(tmp_path: Path, house_specs, table_path: str)
     from ovon.train import train
 
     cfg = train_preset("tiny", algo="dagger", expert="shortest-path", max_updates=1, text_cache=table_path)
-    cfg = dataclasses.replace(cfg, encoder=dataclasses.replace(cfg.encoder, image="cnn", cnn_dim=16,
-                                                               cnn_channels=(8, 16), cnn_depth=True))
+    cfg = dataclasses.replace(
+        cfg, encoder=dataclasses.replace(cfg.encoder, image="cnn", cnn_dim=16, cnn_channels=(8, 16), cnn_depth=True)
+    )
     train(cfg, house_specs, tmp_path / "cnn")
     policy = ActorCritic.load(tmp_path / "cnn" / "policy.pt")
     assert policy.image_encoder is not None
@@ -433,8 +538,23 @@ def test_cli_train_procedural(tmp_path: Path, table_path: str) -> None:
     from ovon.cli.main import main
 
     out = tmp_path / "run"
-    args = ["train", "--algo", "dagger", "--preset", "tiny", "--expert", "shortest-path", "--procedural", "0",
-            "--episodes", "3", "--set", f"text_cache={table_path}", "--out", str(out)]
+    args = [
+        "train",
+        "--algo",
+        "dagger",
+        "--preset",
+        "tiny",
+        "--expert",
+        "shortest-path",
+        "--procedural",
+        "0",
+        "--episodes",
+        "3",
+        "--set",
+        f"text_cache={table_path}",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     assert (out / "policy.pt").is_file() and (out / "config.json").is_file()
     assert main(args) == 2  # refuses to overwrite a run without --resume
@@ -448,12 +568,24 @@ def test_cli_train_resume_refuses_another_run(tmp_path: Path, table_path: str, c
     from ovon.runfolder import FileLock
 
     out = tmp_path / "run"
-    base = ["--preset", "tiny", "--expert", "shortest-path", "--procedural", "0", "--episodes", "3",
-            "--set", f"text_cache={table_path}", "--out", str(out)]
+    base = [
+        "--preset",
+        "tiny",
+        "--expert",
+        "shortest-path",
+        "--procedural",
+        "0",
+        "--episodes",
+        "3",
+        "--set",
+        f"text_cache={table_path}",
+        "--out",
+        str(out),
+    ]
     assert main(["train", "--algo", "dagger", *base]) == 0
     capsys.readouterr()
     assert main(["train", "--algo", "ppo", *base, "--resume"]) == 2
-    assert "algo \"dagger\" -> \"ppo\"" in capsys.readouterr().err
+    assert 'algo "dagger" -> "ppo"' in capsys.readouterr().err
     assert main(["train", "--algo", "dagger", *base, "--set", "policy.layers=3", "--resume"]) == 2
     assert "policy.layers 1 -> 3" in capsys.readouterr().err
     with FileLock(out / ".lock"):  # a second writer
@@ -486,7 +618,12 @@ def test_paper_preset_has_upstream_hyperparameters() -> None:
     assert (cfg.num_envs, cfg.rollout_steps, cfg.ppo.epochs, cfg.ppo.minibatches) == (32, 100, 1, 2)
     assert (cfg.lr, cfg.adam_eps, cfg.max_grad_norm) == (2.5e-4, 1e-5, 0.2)
     assert (cfg.ppo.entropy_coef, cfg.ppo.clip, cfg.ppo.value_coef, cfg.ppo.gamma, cfg.ppo.gae_lambda) == (
-        0.01, 0.2, 0.5, 0.99, 0.95)
+        0.01,
+        0.2,
+        0.5,
+        0.99,
+        0.95,
+    )
     assert cfg.total_steps == 150_000_000 and cfg.policy.context == 100 and cfg.encoder.image == "siglip"
 
 
@@ -497,8 +634,25 @@ def test_cli_config_overrides() -> None:
 
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers())
-    args = parser.parse_args(["train", "--algo", "ppo", "--policy", "lstm", "--encoder", "cnn", "--preset", "tiny",
-                              "--set", "ppo.clip=0.1", "--set", "num_envs=3", "--out", "x"])
+    args = parser.parse_args(
+        [
+            "train",
+            "--algo",
+            "ppo",
+            "--policy",
+            "lstm",
+            "--encoder",
+            "cnn",
+            "--preset",
+            "tiny",
+            "--set",
+            "ppo.clip=0.1",
+            "--set",
+            "num_envs=3",
+            "--out",
+            "x",
+        ]
+    )
     cfg = build_config(args)
     assert isinstance(cfg, TrainConfig)
     assert (cfg.algo, cfg.policy.core, cfg.encoder.image, cfg.ppo.clip, cfg.num_envs) == ("ppo", "lstm", "cnn", 0.1, 3)
@@ -527,8 +681,10 @@ def test_evaluate_uses_the_camera_a_policy_was_trained_with(tmp_path) -> None:
     from ovon.models.policy import build_policy
 
     policy = build_policy(policy_preset("tiny"), 8, 4, EncoderConfig())
-    policy.save(tmp_path / "policy.pt", extra={"camera": {"width": 96, "height": 72, "hfov_deg": 42.0,
-                                                           "backend": "gl", "not_a_field": 1}})
+    policy.save(
+        tmp_path / "policy.pt",
+        extra={"camera": {"width": 96, "height": 72, "hfov_deg": 42.0, "backend": "gl", "not_a_field": 1}},
+    )
     assert checkpoint_facts(str(tmp_path), "objectnav") == {"width": 96, "height": 72, "hfov_deg": 42.0}
     policy.save(tmp_path / "bare.pt")
     assert checkpoint_facts(str(tmp_path / "bare.pt"), "objectnav") == {}
@@ -543,8 +699,12 @@ def test_expert_config_reaches_the_labelling_expert() -> None:
     from ovon.train.config import TrainConfig, train_preset
     from ovon.train.run import expert_config
 
-    cfg = build(TrainConfig, train_preset("tiny"), None, ["frontier_expert.turn_speed_deg=2.5",
-                                                          "shortest_path_expert.turn_threshold_deg=30"])
+    cfg = build(
+        TrainConfig,
+        train_preset("tiny"),
+        None,
+        ["frontier_expert.turn_speed_deg=2.5", "shortest_path_expert.turn_threshold_deg=30"],
+    )
     assert make_expert("frontier", expert_config(cfg)).cfg.turn_speed_deg == 2.5
     sp = dataclasses.replace(cfg, expert="shortest-path")
     assert make_expert("shortest-path", expert_config(sp)).cfg.turn_threshold_deg == 30
@@ -561,9 +721,17 @@ def test_expert_embodiment_follows_the_sim_and_task_config() -> None:
     from ovon.experts.rig import Embodiment
     from ovon.train.config import TrainConfig, train_preset
 
-    cfg = build(TrainConfig, train_preset("tiny"), None,
-                ["sim.agent.turn_angle_deg=15", "sim.agent.forward_step=0.2", "sim.camera.hfov_deg=79",
-                 "task.success_distance=0.1"])
+    cfg = build(
+        TrainConfig,
+        train_preset("tiny"),
+        None,
+        [
+            "sim.agent.turn_angle_deg=15",
+            "sim.agent.forward_step=0.2",
+            "sim.camera.hfov_deg=79",
+            "task.success_distance=0.1",
+        ],
+    )
     env = build_env(EnvRecipe(sim=cfg.sim, task=cfg.task, scene="procedural:0", goal="bed", expert="frontier"))
     body = env.expert.body
     assert body == Embodiment(turn_angle_deg=15.0, forward_step_m=0.2, fov_deg=79.0, stop_distance_m=0.1)
@@ -581,11 +749,14 @@ def test_inner_viewpoints_keep_those_close_to_a_goal_box() -> None:
 
     box = SimpleNamespace(id=7, aabb_min=np.array([0.0, 0.0, 0.0]), aabb_max=np.array([1.0, 1.0, 1.0]))
     other = SimpleNamespace(id=8, aabb_min=np.array([5.0, 0.0, 5.0]), aabb_max=np.array([6.0, 1.0, 6.0]))
-    vps = [GoalViewpoint(np.array([1.3, 0.0, 0.5]), 0.0),   # 0.3 m from the goal box
-           GoalViewpoint(np.array([0.5, 0.0, -0.9]), 0.0),  # 0.9 m
-           GoalViewpoint(np.array([5.5, 0.0, 4.8]), 0.0)]   # next to a non-goal object only
-    p = SimpleNamespace(viewpoints=vps, goal_ids=frozenset({7}), world=SimpleNamespace(scene=SimpleNamespace(
-        objects=[box, other])))
+    vps = [
+        GoalViewpoint(np.array([1.3, 0.0, 0.5]), 0.0),  # 0.3 m from the goal box
+        GoalViewpoint(np.array([0.5, 0.0, -0.9]), 0.0),  # 0.9 m
+        GoalViewpoint(np.array([5.5, 0.0, 4.8]), 0.0),
+    ]  # next to a non-goal object only
+    p = SimpleNamespace(
+        viewpoints=vps, goal_ids=frozenset({7}), world=SimpleNamespace(scene=SimpleNamespace(objects=[box, other]))
+    )
     assert inner_viewpoints(p, 0.4) == [vps[0]]
     assert inner_viewpoints(p, 1.0) == vps[:2]
     assert inner_viewpoints(p, 0.0) == vps  # 0 = all
@@ -602,19 +773,25 @@ def test_cpu_small_features_end_to_end(tmp_path: Path, house_specs, table_path: 
     from ovon.experts.config import FrontierExpertConfig
     from ovon.train import train
 
-    cfg = train_preset("tiny", algo="dagger", text_cache=table_path, stop_loss_weight=2.0,
-                       expert_viewpoint_radius_m=0.4,
-                       frontier_expert=FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5))
+    cfg = train_preset(
+        "tiny",
+        algo="dagger",
+        text_cache=table_path,
+        stop_loss_weight=2.0,
+        expert_viewpoint_radius_m=0.4,
+        frontier_expert=FrontierExpertConfig(turn_speed_deg=2.5, rechoose_every=5),
+    )
     cfg = dataclasses.replace(
-        cfg, policy=dataclasses.replace(cfg.policy, prev_action_dim=0, goal_similarity=True),
+        cfg,
+        policy=dataclasses.replace(cfg.policy, prev_action_dim=0, goal_similarity=True),
         encoder=dataclasses.replace(cfg.encoder, oracle_depth_grid=(2, 2), oracle_collision=True),
-        dagger=dataclasses.replace(cfg.dagger, beta_start=1.0, beta_updates=2, buffer_rollouts=4, grad_steps=2))
+        dagger=dataclasses.replace(cfg.dagger, beta_start=1.0, beta_updates=2, buffer_rollouts=4, grad_steps=2),
+    )
     last = train(cfg, house_specs, tmp_path / "dagger")
     assert np.isfinite(last["loss"]) and 0.0 <= last["accuracy"] <= 1.0
     ft = dataclasses.replace(cfg, algo="ppo", finetune=dataclasses.replace(cfg.finetune, freeze_prev_action=False))
     train(ft, house_specs, tmp_path / "ft", init=str(tmp_path / "dagger"))
-    agent = make_agent("policy", checkpoint=str(tmp_path / "ft" / "policy.pt"), deterministic=False,
-                       temperature=0.5)
+    agent = make_agent("policy", checkpoint=str(tmp_path / "ft" / "policy.pt"), deterministic=False, temperature=0.5)
     assert agent.policy.prev_action_emb is None and agent.policy.sim_parts == 1
     assert agent.image_encoder.dim == agent.policy.image_dim  # 1 text part + 8 depth + 1 collision
     env = make_objectnav(episodes=house_specs[:1], sim=cfg.sim, task=cfg.task, privileged=True)
@@ -628,8 +805,19 @@ def test_cli_trains_dagger_in_bfloat16_and_refuses_it_for_ppo(tmp_path: Path, ca
     torch warning reaches the user); PPO is refused in one line before anything is written."""
     from ovon.cli.main import main
 
-    base = ["train", "--preset", "tiny", "--procedural", "0", "--episodes", "2", "--expert", "shortest-path",
-            "--set", "learn_dtype=bfloat16"]
+    base = [
+        "train",
+        "--preset",
+        "tiny",
+        "--procedural",
+        "0",
+        "--episodes",
+        "2",
+        "--expert",
+        "shortest-path",
+        "--set",
+        "learn_dtype=bfloat16",
+    ]
     assert main([*base, "--algo", "dagger", "--out", str(tmp_path / "dagger")]) == 0
     assert json.loads((tmp_path / "dagger" / "config.json").read_text())["learn_dtype"] == "bfloat16"
     assert "Mismatch dtype" not in capsys.readouterr().err
@@ -639,16 +827,24 @@ def test_cli_trains_dagger_in_bfloat16_and_refuses_it_for_ppo(tmp_path: Path, ca
     assert not (tmp_path / "ppo").exists()
 
 
-@pytest.mark.parametrize(("argv", "needle"), [
-    (["--algos", "ppo-bf16"], "ppo takes no variant '-bf16'"),
-    (["--algos", "bc-overlap"], "bc takes no variant '-overlap'"),
-    (["--algos", "dagerr"], "unknown algorithm 'dagerr'"),
-    (["--set", "learn_dtype=bfloat16"], "learn_dtype float32 for algo ppo"),  # the default algos include ppo
-])
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--algos", "ppo-bf16"], "ppo takes no variant '-bf16'"),
+        (["--algos", "bc-overlap"], "bc takes no variant '-overlap'"),
+        (["--algos", "dagerr"], "unknown algorithm 'dagerr'"),
+        (["--set", "learn_dtype=bfloat16"], "learn_dtype float32 for algo ppo"),  # the default algos include ppo
+    ],
+)
 def test_train_throughput_refuses_a_bad_algorithm_before_any_work(tmp_path: Path, argv: list[str], needle: str) -> None:
     out = tmp_path / "bench.json"
-    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "train_throughput.py"), *argv, "--out", str(out)],
-                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "train_throughput.py"), *argv, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+    )
     lines = res.stderr.strip().splitlines()
     assert res.returncode != 0 and len(lines) == 1 and needle in lines[0], res.stderr
     assert not out.exists()

@@ -62,9 +62,16 @@ def test_python_api_refuses_a_second_writer(tmp_path: Path, bc_cfg) -> None:
     out = tmp_path / "run"
     train(bc_cfg, None, out)
     holder = subprocess.Popen(  # another process holding the folder, as a running `train` does
-        [sys.executable, "-c", "import sys, time\nfrom ovon.runfolder import FileLock\n"
-         f"lock = FileLock({str(out / '.lock')!r})\nprint('held', flush=True)\ntime.sleep(60)"],
-        cwd=ROOT, stdout=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\nfrom ovon.runfolder import FileLock\n"
+            f"lock = FileLock({str(out / '.lock')!r})\nprint('held', flush=True)\ntime.sleep(60)",
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
         with pytest.raises(RunFolderError, match="is in use by another ovon process"):
@@ -78,10 +85,16 @@ def test_python_api_refuses_a_second_writer(tmp_path: Path, bc_cfg) -> None:
 def test_python_api_refuses_resuming_with_other_episodes(tmp_path: Path) -> None:
     specs = adhoc_specs([0], categories=["bed", "toilet"])
     table = tmp_path / "table.pt"
-    write_text_table(table, {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(16).astype(np.float32)
-                             for t in needed_texts(adhoc_specs([0]))})
-    cfg = train_preset("tiny", algo="dagger", expert="shortest-path", num_envs=1, rollout_steps=4, max_updates=1,
-                       text_cache=str(table))
+    write_text_table(
+        table,
+        {
+            t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(16).astype(np.float32)
+            for t in needed_texts(adhoc_specs([0]))
+        },
+    )
+    cfg = train_preset(
+        "tiny", algo="dagger", expert="shortest-path", num_envs=1, rollout_steps=4, max_updates=1, text_cache=str(table)
+    )
     out = tmp_path / "dagger"
     train(cfg, specs, out)
     assert json.loads((out / "run_identity.json").read_text())["inputs"]["episodes"]["sha256"] == specs_sha256(specs)

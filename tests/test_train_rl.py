@@ -30,8 +30,10 @@ def specs():
 @pytest.fixture(scope="module")
 def table(tmp_path_factory, specs) -> str:
     path = tmp_path_factory.mktemp("text") / "table.pt"
-    vec = {t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(16).astype(np.float32)
-           for t in needed_texts(specs)}
+    vec = {
+        t: np.random.default_rng(zlib.crc32(t.encode())).standard_normal(16).astype(np.float32)
+        for t in needed_texts(specs)
+    }
     write_text_table(path, vec)
     return str(path)
 
@@ -78,8 +80,9 @@ def test_first_updates_at_lr_zero_have_ratio_one(tmp_path: Path, specs, table: s
 
 
 @pytest.mark.parametrize("core", ["transformer", "lstm"])
-def test_dagger_with_its_context_prefix_learns_from_the_policy_that_acted(tmp_path: Path, specs, table: str,
-                                                                         core: str) -> None:
+def test_dagger_with_its_context_prefix_learns_from_the_policy_that_acted(
+    tmp_path: Path, specs, table: str, core: str
+) -> None:
     """`dagger.context_prefix`: each buffered chunk is re-read after the steps acting saw (transformer) or
     from the acting (h, c) (LSTM), so at lr 0 the update's log-probs of the newest rollout equal those the
     actions were taken with (`behaviour_kl` 0) in every update; without it they differ once episodes
@@ -88,9 +91,13 @@ def test_dagger_with_its_context_prefix_learns_from_the_policy_that_acted(tmp_pa
 
     for prefix, buffer in ((True, 3), (True, 1), (False, 3)):
         cfg = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table, max_updates=6, lr=0.0)
-        cfg = dataclasses.replace(cfg, policy=dataclasses.replace(cfg.policy, core=core, layers=2, context=6),
-                                  dagger=dataclasses.replace(cfg.dagger, context_prefix=prefix, grad_steps=2,
-                                                             buffer_rollouts=buffer, sample_rollouts=min(2, buffer)))
+        cfg = dataclasses.replace(
+            cfg,
+            policy=dataclasses.replace(cfg.policy, core=core, layers=2, context=6),
+            dagger=dataclasses.replace(
+                cfg.dagger, context_prefix=prefix, grad_steps=2, buffer_rollouts=buffer, sample_rollouts=min(2, buffer)
+            ),
+        )
         out = tmp_path / f"{core}-{prefix}-{buffer}"
         train(cfg, specs, out)
         kl = [r["behaviour_kl"] for r in read_metrics(out)]
@@ -107,8 +114,11 @@ def test_without_the_context_prefix_the_update_reads_another_policy(tmp_path: Pa
     from ovon.train import train
 
     cfg = train_preset("tiny", algo="ppo", text_cache=table, max_updates=5, lr=0.0)
-    cfg = dataclasses.replace(cfg, ppo=dataclasses.replace(cfg.ppo, context_prefix=False),
-                              policy=dataclasses.replace(cfg.policy, layers=2, context=6))
+    cfg = dataclasses.replace(
+        cfg,
+        ppo=dataclasses.replace(cfg.ppo, context_prefix=False),
+        policy=dataclasses.replace(cfg.policy, layers=2, context=6),
+    )
     train(cfg, specs, tmp_path / "noprefix")
     rows = read_metrics(tmp_path / "noprefix")
     assert rows[0]["behaviour_kl"] < 1e-6  # the first chunk starts every episode: same context
@@ -153,15 +163,21 @@ def test_lstm_reference_carries_its_own_memory_from_chunk_to_chunk() -> None:
         ref_state = tuned_state = None
         for c in range(chunks):
             sl = slice(c * T, c * T + T + 1)
-            logits, ref_state = reference_logits(reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0,
-                                                 T, ref_state)
-            torch.testing.assert_close(logits, whole[:, c * T:(c + 1) * T], rtol=1e-5, atol=1e-5)
-            wrong, _ = reference_logits(reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0, T,
-                                        tuned_state)
+            logits, ref_state = reference_logits(
+                reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0, T, ref_state
+            )
+            torch.testing.assert_close(logits, whole[:, c * T : (c + 1) * T], rtol=1e-5, atol=1e-5)
+            wrong, _ = reference_logits(
+                reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0, T, tuned_state
+            )
             if c > 0:
                 assert (wrong - logits).abs().max() > 1e-3
-            tuned_state = tuned.forward_seq(tuned.make_obs(img[:, sl][:, :T], goal[:, sl][:, :T]), prev[:, sl][:, :T],
-                                            starts[:, sl][:, :T], tuned_state)[2]
+            tuned_state = tuned.forward_seq(
+                tuned.make_obs(img[:, sl][:, :T], goal[:, sl][:, :T]),
+                prev[:, sl][:, :T],
+                starts[:, sl][:, :T],
+                tuned_state,
+            )[2]
 
 
 @pytest.mark.parametrize("anchor", ["kl", "expert"])
@@ -171,9 +187,14 @@ def test_finetune_anchor_keeps_the_initial_policy(tmp_path: Path, specs, table: 
 
     dag = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table)
     train(dag, specs, tmp_path / "dagger")
-    ft = dataclasses.replace(dag, algo="ppo", max_updates=3,
-                             finetune=FinetuneConfig(anchor=anchor, anchor_coef=0.5, anchor_decay_updates=4,
-                                                     actor_unfreeze=0, actor_warmup_end=0, actor_lr=1e-3))
+    ft = dataclasses.replace(
+        dag,
+        algo="ppo",
+        max_updates=3,
+        finetune=FinetuneConfig(
+            anchor=anchor, anchor_coef=0.5, anchor_decay_updates=4, actor_unfreeze=0, actor_warmup_end=0, actor_lr=1e-3
+        ),
+    )
     train(ft, specs, tmp_path / "ft", init=str(tmp_path / "dagger"))
     rows = read_metrics(tmp_path / "ft")
     assert [r["anchor/weight"] for r in rows] == [0.5, 0.375, 0.25]
@@ -190,9 +211,12 @@ def test_critic_warmup_gate_holds_the_actor(tmp_path: Path, specs, table: str) -
 
     dag = train_preset("tiny", algo="dagger", expert="shortest-path", text_cache=table)
     train(dag, specs, tmp_path / "dagger")
-    ft = dataclasses.replace(dag, algo="ppo", max_updates=3,
-                             finetune=FinetuneConfig(actor_unfreeze=0, actor_warmup_end=0, actor_lr=1e-3,
-                                                     critic_warmup_ev=0.999))
+    ft = dataclasses.replace(
+        dag,
+        algo="ppo",
+        max_updates=3,
+        finetune=FinetuneConfig(actor_unfreeze=0, actor_warmup_end=0, actor_lr=1e-3, critic_warmup_ev=0.999),
+    )
     train(ft, specs, tmp_path / "ft", init=str(tmp_path / "dagger"))
     rows = read_metrics(tmp_path / "ft")
     assert all(r["lr/actor"] == 0.0 and r["actor_gate_open"] == 0.0 for r in rows)
@@ -200,8 +224,7 @@ def test_critic_warmup_gate_holds_the_actor(tmp_path: Path, specs, table: str) -
 
 
 @pytest.mark.parametrize("core", ["transformer", "lstm"])
-def test_separate_critic_trains_its_own_core_and_resumes_exactly(tmp_path: Path, specs, table: str,
-                                                                 core: str) -> None:
+def test_separate_critic_trains_its_own_core_and_resumes_exactly(tmp_path: Path, specs, table: str, core: str) -> None:
     """`finetune.critic=separate`: the critic is a copy of the initial network whose core learns the value
     (the shared critic is a linear read of features trained for actions); the policy gets no value
     gradient (actor frozen here: its weights stay the initial ones); an LSTM critic carries its own memory

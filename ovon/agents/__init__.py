@@ -42,8 +42,9 @@ def load_agent_class(name: str) -> type:
         raise AgentError(f"agent {name!r}: {module_name}:{cls_name} is a {type(obj).__name__}, not a class; {fix}")
     missing = [m for m in ("reset", "act") if not callable(getattr(obj, m, None))]
     if missing:
-        raise AgentError(f"agent {name!r}: class {obj.__module__}.{obj.__qualname__} has no {' / '.join(missing)} "
-                         f"method; {fix}")
+        raise AgentError(
+            f"agent {name!r}: class {obj.__module__}.{obj.__qualname__} has no {' / '.join(missing)} method; {fix}"
+        )
     return obj
 
 
@@ -57,10 +58,17 @@ def _bind(name: str, cls: type, kwargs: dict) -> None:
     names = [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
     unknown = [k for k in kwargs if k not in names]
     if unknown and not accepts_any:
-        raise AgentError(f"agent {name!r} has no constructor argument {unknown[0]!r} (--agent-arg {unknown[0]}=...); "
-                         f"fix: use one of {names or 'none'}")
-    missing = [p.name for p in params if p.default is inspect.Parameter.empty
-               and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in kwargs]
+        raise AgentError(
+            f"agent {name!r} has no constructor argument {unknown[0]!r} (--agent-arg {unknown[0]}=...); "
+            f"fix: use one of {names or 'none'}"
+        )
+    missing = [
+        p.name
+        for p in params
+        if p.default is inspect.Parameter.empty
+        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        and p.name not in kwargs
+    ]
     if missing:
         flag = "--checkpoint PATH" if missing[0] == "checkpoint" else f"--agent-arg {missing[0]}=VALUE"
         raise AgentError(f"agent {name!r} needs the argument {missing[0]!r}; fix: pass {flag}")
@@ -80,8 +88,10 @@ def check_agent(name: str, kwargs: dict | None = None) -> None:
     except Exception as e:  # noqa: BLE001 - the constructor is user code: report, don't trace
         detail = " ".join(str(e).split())[:200]
         args = ", ".join(f"{k}={v!r}" for k, v in kwargs.items()) or "no arguments"
-        raise AgentError(f"agent {name!r} cannot be built with {args}: {type(e).__name__}: {detail}; fix: check "
-                         "--agent, --agent-arg and --checkpoint") from None
+        raise AgentError(
+            f"agent {name!r} cannot be built with {args}: {type(e).__name__}: {detail}; fix: check "
+            "--agent, --agent-arg and --checkpoint"
+        ) from None
     if not isinstance(agent, Agent):
         raise AgentError(f"agent {name!r} must define reset(episode_info) and act(observation)")
     del agent

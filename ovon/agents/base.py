@@ -25,8 +25,10 @@ from ovon.config.base import Pattern
 
 # The name of an agent's row in table.md (and a label of figures): a '|' or a line break would split the row or
 # the table. `EvalConfig.name` and a served agent's name share it.
-ROW_NAME = Pattern(r"(?=.*\S)[^|\x00-\x1f\x7f-\x9f\u2028\u2029]{1,100}",
-                   "1 to 100 characters without '|', line breaks or control characters (a row of table.md)")
+ROW_NAME = Pattern(
+    r"(?=.*\S)[^|\x00-\x1f\x7f-\x9f\u2028\u2029]{1,100}",
+    "1 to 100 characters without '|', line breaks or control characters (a row of table.md)",
+)
 
 
 @runtime_checkable

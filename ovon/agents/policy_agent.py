@@ -35,8 +35,14 @@ class PolicyAgentArgs:
 
 
 class PolicyAgent:
-    def __init__(self, checkpoint: str, deterministic: bool = True, device: str | torch.device = "cpu",
-                 threads: int = 1, temperature: float = 1.0) -> None:
+    def __init__(
+        self,
+        checkpoint: str,
+        deterministic: bool = True,
+        device: str | torch.device = "cpu",
+        threads: int = 1,
+        temperature: float = 1.0,
+    ) -> None:
         """`deterministic`: argmax actions; else sample from softmax(logits / temperature) with a generator
         seeded per episode (reproducible). Argmax can lock an imitation policy into a turn-left /
         turn-right cycle; sampling breaks it, and a temperature < 1 keeps rare actions (STOP) rare."""
@@ -84,8 +90,10 @@ class PolicyAgent:
 
     def _image(self, observation: dict) -> torch.Tensor:
         if self.image_encoder is None:
-            batch = {"rgb": torch.from_numpy(np.ascontiguousarray(observation["rgb"]))[None].to(self.device),
-                     "depth": torch.from_numpy(np.asarray(observation["depth"], np.float32))[None].to(self.device)}
+            batch = {
+                "rgb": torch.from_numpy(np.ascontiguousarray(observation["rgb"]))[None].to(self.device),
+                "depth": torch.from_numpy(np.asarray(observation["depth"], np.float32))[None].to(self.device),
+            }
             return self.policy.encode_images(batch)
         semantic = None
         if self.privileged:
@@ -102,8 +110,10 @@ class PolicyAgent:
             self.reset({})
         if self.pointnav:
             if "pointgoal" not in observation:
-                raise ValueError("this is a PointNav policy: it needs observation['pointgoal'] (an env with "
-                                 "task.kind=pointnav, e.g. `ovon evaluate --task pointnav`)")
+                raise ValueError(
+                    "this is a PointNav policy: it needs observation['pointgoal'] (an env with "
+                    "task.kind=pointnav, e.g. `ovon evaluate --task pointnav`)"
+                )
             goal = torch.as_tensor(np.asarray(observation["pointgoal"], np.float32))[None].to(self.device)
         else:
             goal = self.text.encode([observation["goal"]]).to(self.device)

@@ -11,8 +11,10 @@ class RandomAgent:
     def __init__(self, stop_probability: float = 0.02, seed: int = 0):
         self.stop_probability = float(stop_probability)
         if not 0.0 <= self.stop_probability <= 1.0:  # also refuses NaN
-            raise ValueError(f"--agent-arg stop_probability={stop_probability!r}: a probability in [0, 1] is "
-                             "expected; fix: e.g. --agent-arg stop_probability=0.02")
+            raise ValueError(
+                f"--agent-arg stop_probability={stop_probability!r}: a probability in [0, 1] is "
+                "expected; fix: e.g. --agent-arg stop_probability=0.02"
+            )
         self.seed = int(seed)
         self.rng = np.random.default_rng(seed)
 

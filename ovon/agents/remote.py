@@ -75,8 +75,10 @@ def _bad_host(host: str, bracketed: bool) -> str:
             return "in brackets is not an IPv6 address"
         return ""
     if ":" in host:
-        return ("holds ':'; expected one HOST:PORT (an IPv6 address goes in brackets, e.g. remote:[::1]:5555, "
-                "and nothing may follow PORT)")
+        return (
+            "holds ':'; expected one HOST:PORT (an IPv6 address goes in brackets, e.g. remote:[::1]:5555, "
+            "and nothing may follow PORT)"
+        )
     if host == "*":
         return "is an address to listen on (ovon serve --host), not one to connect to; expected the server's host"
     if not _HOST_NAME.fullmatch(host):
@@ -91,8 +93,10 @@ def _resolve(spec: str, host: str, port: int) -> None:
         socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
     except (socket.gaierror, UnicodeError) as e:
         why = getattr(e, "strerror", None) or str(e)
-        raise ConfigError(f"--agent {spec}: the host {host!r} does not resolve ({why}); fix: check the host "
-                          "name (or pass the server's IP address), e.g. remote:127.0.0.1:5555") from None
+        raise ConfigError(
+            f"--agent {spec}: the host {host!r} does not resolve ({why}); fix: check the host "
+            "name (or pass the server's IP address), e.g. remote:127.0.0.1:5555"
+        ) from None
 
 
 def _short(value: Any) -> str:
@@ -140,8 +144,10 @@ class RemoteAgent:
         self.name = agent_name if isinstance(agent_name, str) and agent_name.strip() else self.spec
         privileged = hello.get("privileged")
         wanted = hello.get("observations")
-        fix = ("fix: the `observations` the agent is served with (ovon serve --observations, "
-               "ovon_agent.serve(observations=...))")
+        fix = (
+            "fix: the `observations` the agent is served with (ovon serve --observations, "
+            "ovon_agent.serve(observations=...))"
+        )
         if not (wanted is None or (isinstance(wanted, list | tuple) and all(isinstance(o, str) for o in wanted))):
             self.close()  # a string would be split into letters, a number is not iterable
             raise ConfigError(
@@ -181,8 +187,10 @@ class RemoteAgent:
         if kind == "agent":
             return f"{message}; fix: see the server's log and fix the agent{resume}"
         if kind == "protocol":
-            return (f"{message}; fix: check that {self.spec.removeprefix(PREFIX)} is an agent served by `ovon serve` "
-                    "or ovon_agent.serve, of the same version on both sides")
+            return (
+                f"{message}; fix: check that {self.spec.removeprefix(PREFIX)} is an agent served by `ovon serve` "
+                "or ovon_agent.serve, of the same version on both sides"
+            )
         if kind == "address":
             return f"{message}; {_FIX}"
         port = self.spec.rpartition(":")[2]

@@ -77,8 +77,13 @@ def register(sub) -> None:
     g.add_argument("--split", action="append", help="only these splits (repeatable); default all four")
     g.add_argument("--categories", help="an existing categories.json to reuse (from `ovon dataset splits`)")
     g.add_argument("--config", help="YAML with GenerationConfig fields")
-    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override, e.g. episodes_per_val_split=300 or viewpoints.render_size=128")
+    g.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override, e.g. episodes_per_val_split=300 or viewpoints.render_size=128",
+    )
     g.add_argument("--workers", default=min(2, os.cpu_count() or 1))
     g.add_argument("--executor", choices=["process", "ray"], default="process")
     g.add_argument("--no-progress", action="store_true")
@@ -124,8 +129,16 @@ def cmd_generate(args) -> int:
     cat_path = Path(a.categories) if a.categories else Path(args.out) / "categories.json"
     if cat_path.is_file():
         check_generation_categories(cat_path, a.scenes, a.split)
-    rep = generate(a.scenes, args.out, cfg, splits=a.split, workers=a.workers, executor=a.executor,
-                   progress=not args.no_progress, category_split_path=a.categories or None)
+    rep = generate(
+        a.scenes,
+        args.out,
+        cfg,
+        splits=a.split,
+        workers=a.workers,
+        executor=a.executor,
+        progress=not args.no_progress,
+        category_split_path=a.categories or None,
+    )
     n = sum(rep.episodes.values())
     per_scene = rep.seconds / max(1, rep.scenes)
     print(f"new episodes per split: {json.dumps(rep.episodes)}")
@@ -133,8 +146,11 @@ def cmd_generate(args) -> int:
         print(f"objects that are not goals: {dict(rep.not_goal_reasons)}")
     if rep.rejections:
         print(f"start rejections: {dict(rep.rejections)}")
-    print(f"{rep.scenes} scenes in {rep.seconds:.1f} s ({per_scene:.1f} s/scene"
-          + (f", {1000 * rep.seconds / n:.1f} s per 1000 episodes" if n else "") + f"); dataset: {args.out}")
+    print(
+        f"{rep.scenes} scenes in {rep.seconds:.1f} s ({per_scene:.1f} s/scene"
+        + (f", {1000 * rep.seconds / n:.1f} s per 1000 episodes" if n else "")
+        + f"); dataset: {args.out}"
+    )
     return 0
 
 
@@ -161,11 +177,13 @@ def check_generation_categories(path: Path, scenes: str, splits: tuple[str, ...]
         if not set(cats) & present[kind]:
             key = split if split in HELD_OUT_SPLITS else "train"
             shown = ", ".join(repr(c) for c in cats[:5]) + (f" and {len(cats) - 5} more" if len(cats) > 5 else "")
-            raise DatasetError(f"{path}: none of its {len(cats)} {key} categories ({shown}) is annotated in a {kind} "
-                               f"scene of {scenes}, so the {split} split would get no episode; expected a "
-                               f"categories.json made for these scenes; fix: pass --categories with a file whose "
-                               f"{key} names categories of the {kind} scenes (`ovon dataset splits --scenes {scenes}`, "
-                               f"another --seed if needed), or leave --split {split} out")
+            raise DatasetError(
+                f"{path}: none of its {len(cats)} {key} categories ({shown}) is annotated in a {kind} "
+                f"scene of {scenes}, so the {split} split would get no episode; expected a "
+                f"categories.json made for these scenes; fix: pass --categories with a file whose "
+                f"{key} names categories of the {kind} scenes (`ovon dataset splits --scenes {scenes}`, "
+                f"another --seed if needed), or leave --split {split} out"
+            )
 
 
 def cmd_splits(args) -> int:
@@ -174,10 +192,13 @@ def cmd_splits(args) -> int:
 
     a = from_args(SplitsArgs, args)
     if args.vocabulary == bool(a.scenes):
-        raise ConfigError("ovon dataset splits: give exactly one of --scenes DIR or --vocabulary; fix: e.g. "
-                          "ovon dataset splits --vocabulary --out categories.json")
-    check_output_path(a.out, "--out", expected="the path of categories.json", example="categories.json",
-                      error=ConfigError)
+        raise ConfigError(
+            "ovon dataset splits: give exactly one of --scenes DIR or --vocabulary; fix: e.g. "
+            "ovon dataset splits --vocabulary --out categories.json"
+        )
+    check_output_path(
+        a.out, "--out", expected="the path of categories.json", example="categories.json", error=ConfigError
+    )
     if args.vocabulary:
         from ovon.scenes.vocabulary import load_vocabulary
 
@@ -186,16 +207,17 @@ def cmd_splits(args) -> int:
         from ovon.dataset.generate import discover_scenes, scene_categories
 
         cats = sorted(set().union(*(scene_categories(r) for r in discover_scenes(a.scenes))))
-    cs = split_categories(cats, SplitConfig(seed=a.seed, holdout_fraction=a.holdout,
-                                            similarity_threshold=a.threshold))
+    cs = split_categories(cats, SplitConfig(seed=a.seed, holdout_fraction=a.holdout, similarity_threshold=a.threshold))
     problem = empty_held_out_problem(cs, len(cats), a.holdout)
     if problem:  # a file with an empty held-out list gives a dataset that `dataset validate` rejects
         raise ConfigError(problem)
     cs.save(a.out)
     for name in HELD_OUT_SPLITS:
         rng = cs.similarity_range(name)
-        print(f"{name}: {len(cs.categories(name))} categories"
-              + (f", similarity [{rng[0]:.2f}, {rng[1]:.2f}]" if rng else ""))
+        print(
+            f"{name}: {len(cs.categories(name))} categories"
+            + (f", similarity [{rng[0]:.2f}, {rng[1]:.2f}]" if rng else "")
+        )
     print(f"train: {len(cs.categories('train'))} categories; written {Path(a.out)}")
     return 0
 
@@ -212,8 +234,9 @@ def cmd_validate(args) -> int:
     from ovon.dataset.validate import validate_dataset
 
     a = from_args(ValidateArgs, args, split=tuple(args.split) if args.split else None)
-    rep = validate_dataset(a.data, a.scenes, list(a.split) if a.split else None,
-                           max_episodes_per_scene=a.max_episodes_per_scene)
+    rep = validate_dataset(
+        a.data, a.scenes, list(a.split) if a.split else None, max_episodes_per_scene=a.max_episodes_per_scene
+    )
     for e in rep.errors[:50]:
         print(f"  {e}")
     status = "OK" if rep.ok else f"{sum(rep.counts.values())} problem(s): {dict(rep.counts)}"

@@ -72,12 +72,38 @@ def cmd_demo(args) -> int:
     for split, count in (("train", a.train_scenes), ("val", a.val_scenes)):
         if count == 0:
             continue
-        rc = ovon(["scenes", "generate", "--split", split, "--count", str(count), "--seed", "0",
-                   "--out", str(scenes), "--workers", str(a.workers)])
+        rc = ovon(
+            [
+                "scenes",
+                "generate",
+                "--split",
+                split,
+                "--count",
+                str(count),
+                "--seed",
+                "0",
+                "--out",
+                str(scenes),
+                "--workers",
+                str(a.workers),
+            ]
+        )
         if rc:
             return rc
-    gen = ["dataset", "generate", "--scenes", str(scenes), "--out", str(data), "--preset", "fast",
-           "--workers", str(a.workers), "--set", f"episodes_per_val_split={max(a.episodes, 30)}"]
+    gen = [
+        "dataset",
+        "generate",
+        "--scenes",
+        str(scenes),
+        "--out",
+        str(data),
+        "--preset",
+        "fast",
+        "--workers",
+        str(a.workers),
+        "--set",
+        f"episodes_per_val_split={max(a.episodes, 30)}",
+    ]
     for s in VAL_SPLITS:
         gen += ["--split", s]
     rc = ovon(gen)
@@ -86,9 +112,25 @@ def cmd_demo(args) -> int:
     ovon(["dataset", "stats", str(data)])
     for agent in AGENTS:
         seeds = a.seeds if agent in STOCHASTIC else a.seeds[:1]
-        rc = ovon(["evaluate", "--agent", agent, "--data", str(data), "--scenes", str(scenes),
-                   "--seeds", ",".join(str(s) for s in seeds), "--episodes", str(a.episodes),
-                   "--workers", str(a.workers), "--out", str(runs / agent)])
+        rc = ovon(
+            [
+                "evaluate",
+                "--agent",
+                agent,
+                "--data",
+                str(data),
+                "--scenes",
+                str(scenes),
+                "--seeds",
+                ",".join(str(s) for s in seeds),
+                "--episodes",
+                str(a.episodes),
+                "--workers",
+                str(a.workers),
+                "--out",
+                str(runs / agent),
+            ]
+        )
         if rc:
             return rc
     report = runs / "report"

@@ -17,11 +17,16 @@ def register(sub) -> None:
     r.add_argument("--scale", required=True, help="tiny | cpu | paper (scales.yaml)")
     r.add_argument("--shard", help="i/n (0-based): take shard i of n; shards are whole dependency chains")
     r.add_argument("--only", help="comma-separated cells (NAME, train:NAME or eval:NAME), with what they need")
-    r.add_argument("--redo", help="comma-separated cells to recompute, with what depends on them (old folders are "
-                                  "kept as <folder>.old-N)")
+    r.add_argument(
+        "--redo",
+        help="comma-separated cells to recompute, with what depends on them (old folders are kept as <folder>.old-N)",
+    )
     r.add_argument("--dry-run", action="store_true", help="print each cell's status and exact command; run nothing")
-    r.add_argument("--no-wait", action="store_true",
-                   help="leave cells another process is running (and what needs them) instead of waiting")
+    r.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="leave cells another process is running (and what needs them) instead of waiting",
+    )
     r.add_argument("--no-report", action="store_true", help="do not write <root>/<scale>/reports/<name>/")
     r.set_defaults(func=cmd_run)
 
@@ -33,11 +38,19 @@ def register(sub) -> None:
 
 
 def _common(p) -> None:
-    p.add_argument("name", help="experiment: main | trajectories | memory | noise | failures, a comma-separated "
-                                "list, all, or the path of an experiment .yaml")
+    p.add_argument(
+        "name",
+        help="experiment: main | trajectories | memory | noise | failures, a comma-separated "
+        "list, all, or the path of an experiment .yaml",
+    )
     p.add_argument("--root", required=True, help="run root: data, cells, logs and reports go to <root>/<scale>/")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="scale override, e.g. evaluate.episodes=50, data.episodes=PATH, train.nproc_per_node=4")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scale override, e.g. evaluate.episodes=50, data.episodes=PATH, train.nproc_per_node=4",
+    )
 
 
 def _experiments(name: str) -> list:
@@ -47,9 +60,11 @@ def _experiments(name: str) -> list:
 
     names = experiment_names() if name == "all" else [n.strip() for n in name.split(",") if n.strip()]
     if not names:
-        raise DefinitionError(f"experiment name {name!r} names no experiment; expected one of "
-                              f"{', '.join(experiment_names())}, a comma-separated list, all, or the path of an "
-                              "experiment .yaml; fix: name one, e.g. main")
+        raise DefinitionError(
+            f"experiment name {name!r} names no experiment; expected one of "
+            f"{', '.join(experiment_names())}, a comma-separated list, all, or the path of an "
+            "experiment .yaml; fix: name one, e.g. main"
+        )
     return [load_experiment(n) for n in dict.fromkeys(names)]
 
 
@@ -94,8 +109,15 @@ def cmd_run(args) -> int:
     redo = _csv(args.redo)
     match_cells(plan, redo, flag="--redo")  # an unknown --redo cell, named as --redo, before any work
     try:
-        result = run(plan, only=_csv(args.only) or None, shard=shard, redo_cells=redo,
-                     dry_run=args.dry_run, wait=not args.no_wait, write_report=not args.no_report)
+        result = run(
+            plan,
+            only=_csv(args.only) or None,
+            shard=shard,
+            redo_cells=redo,
+            dry_run=args.dry_run,
+            wait=not args.no_wait,
+            write_report=not args.no_report,
+        )
     except KeyboardInterrupt:  # with --redo the old results are already aside: --redo again would redo anew
         print("interrupted: re-run the same command " + ("without --redo " if redo else "") + "to resume")
         return 130
@@ -108,8 +130,9 @@ def cmd_report(args) -> int:
 
     scale = args.scale or _only_scale(_check_root(args.root))
     plan = _plan(args, scale)
-    out = check_output_path(args.out if args.out is not None else plan.base / "reports" / plan.names, "--out",
-                            folder=True)
+    out = check_output_path(
+        args.out if args.out is not None else plan.base / "reports" / plan.names, "--out", folder=True
+    )
     path = build_report(plan, out)
     print(f"report: {path}")
     return 0
@@ -120,6 +143,7 @@ def _only_scale(root: Path) -> str:
 
     found = [s for s in load_catalogue().scales if (root / s / "cells").is_dir()]
     if len(found) != 1:
-        raise ValueError(f"--root {root} holds runs of scale(s) {found or 'none'}; fix: pass --scale "
-                         "(tiny | cpu | paper)")
+        raise ValueError(
+            f"--root {root} holds runs of scale(s) {found or 'none'}; fix: pass --scale (tiny | cpu | paper)"
+        )
     return found[0]

@@ -55,8 +55,17 @@ def expected_errors() -> tuple[type[BaseException], ...]:
     from ovon.config.base import ConfigError
     from ovon.parallel import WorkerDied
 
-    errors: tuple[type[BaseException], ...] = (ConfigError, ValueError, KeyError, FileNotFoundError, FileExistsError,
-                                               NotADirectoryError, IsADirectoryError, PermissionError, WorkerDied)
+    errors: tuple[type[BaseException], ...] = (
+        ConfigError,
+        ValueError,
+        KeyError,
+        FileNotFoundError,
+        FileExistsError,
+        NotADirectoryError,
+        IsADirectoryError,
+        PermissionError,
+        WorkerDied,
+    )
     remote = sys.modules.get("ovon_agent")  # a served agent that failed, hung or went away (its own line)
     return errors + ((remote.RemoteError,) if remote is not None else ())
 
@@ -116,8 +125,11 @@ def _run(args: argparse.Namespace) -> int:
         except MemoryError:
             if debug:
                 raise
-            print("ovon: error: out of memory; fix: smaller settings (e.g. --set sim.camera.width=160) or fewer "
-                  "--workers", file=sys.stderr)
+            print(
+                "ovon: error: out of memory; fix: smaller settings (e.g. --set sim.camera.width=160) or fewer "
+                "--workers",
+                file=sys.stderr,
+            )
             return 2
         except Exception as e:  # noqa: BLE001 - last resort: still one line, marked as a bug when it is one
             if debug:
@@ -126,8 +138,11 @@ def _run(args: argparse.Namespace) -> int:
             if line is not None:
                 print(f"ovon: error: {_one_line(line)}", file=sys.stderr)
                 return 2
-            print(f"ovon: internal error: {type(e).__name__}: {_one_line(e)[:300]} (a bug in ovon: please report it; "
-                  "OVON_DEBUG=1 shows the traceback)", file=sys.stderr)
+            print(
+                f"ovon: internal error: {type(e).__name__}: {_one_line(e)[:300]} (a bug in ovon: please report it; "
+                "OVON_DEBUG=1 shows the traceback)",
+                file=sys.stderr,
+            )
             return 3
 
 

@@ -43,9 +43,11 @@ def check_count(count: int, split: str) -> None:
     the other split's or the next seed's houses): one line naming --count, before any work."""
     cap = SPLIT_CAPACITY[split]
     if count > cap:
-        raise ConfigError(f"--count = {count}: --split {split} holds at most {cap} houses per --seed (more would "
-                          f"reuse the houses of another split or seed); expected an integer in [1, {cap}]; fix: pass "
-                          f"--count {cap} or less (and another --seed for more houses)")
+        raise ConfigError(
+            f"--count = {count}: --split {split} holds at most {cap} houses per --seed (more would "
+            f"reuse the houses of another split or seed); expected an integer in [1, {cap}]; fix: pass "
+            f"--count {cap} or less (and another --seed for more houses)"
+        )
 
 
 def house_seed(seed: int, split: str, index: int) -> int:
@@ -58,8 +60,10 @@ def house_seed(seed: int, split: str, index: int) -> int:
             f"{split} holds at most {SPLIT_CAPACITY[split]} houses per seed, index {index} is out of range"
         )
     if not 0 <= seed <= MAX_DATASET_SEED:
-        raise ValueError(f"--seed = {seed}: expected an integer in [0, {MAX_DATASET_SEED}] (house seeds are kept to "
-                         "32 bits); fix: pass a smaller --seed")
+        raise ValueError(
+            f"--seed = {seed}: expected an integer in [0, {MAX_DATASET_SEED}] (house seeds are kept to "
+            "32 bits); fix: pass a smaller --seed"
+        )
     return int(seed) * SEED_STRIDE + SPLIT_BASE[split] + int(index)
 
 
@@ -180,19 +184,31 @@ def _inspect_navmesh(args: argparse.Namespace) -> int:
     over = Table(title=f"Navmesh {Path(args.path).name}", show_header=False)
     over.add_column("key", style="bold")
     over.add_column("value")
-    over.add_row("format", f"habitat navmesh version {s['version']}, {s['tiles']} tile(s), {s['polygons']} polygons "
-                           f"({s['walkable_polygons']} walkable)")
+    over.add_row(
+        "format",
+        f"habitat navmesh version {s['version']}, {s['tiles']} tile(s), {s['polygons']} polygons "
+        f"({s['walkable_polygons']} walkable)",
+    )
     settings = s["settings"]
-    over.add_row("baked for", f"agent radius {s['agent_radius']:.3f} m" + (
-        f", height {settings['agent_height']:.2f} m, max climb {settings['agent_max_climb']:.2f} m, max slope "
-        f"{settings['agent_max_slope']:.0f} deg, cell {settings['cell_size']:.3f} m" if settings
-        else " (version 1: no NavMeshSettings stored)"))
+    over.add_row(
+        "baked for",
+        f"agent radius {s['agent_radius']:.3f} m"
+        + (
+            f", height {settings['agent_height']:.2f} m, max climb {settings['agent_max_climb']:.2f} m, max slope "
+            f"{settings['agent_max_slope']:.0f} deg, cell {settings['cell_size']:.3f} m"
+            if settings
+            else " (version 1: no NavMeshSettings stored)"
+        ),
+    )
     over.add_row("bounds", f"{s['bounds_min']} .. {s['bounds_max']}")
     over.add_row("navigable area", f"{s['navigable_area_m2']:.3f} m² (3D area of the walkable detail triangles)")
     over.add_row("islands", str(s["num_islands"]))
     for g in s.get("grid", []):
-        over.add_row(f"ovon grid floor {g['floor']}", f"{g['navigable_m2']:.2f} m² at y={g['height']:.2f} in "
-                     f"{g['islands']} islands ({g['cell_size']:.3f} m cells)")
+        over.add_row(
+            f"ovon grid floor {g['floor']}",
+            f"{g['navigable_m2']:.2f} m² at y={g['height']:.2f} in "
+            f"{g['islands']} islands ({g['cell_size']:.3f} m cells)",
+        )
     console.print(over)
     isl = Table(title=f"Islands (largest first{', first 50' if s['num_islands'] > 50 else ''})")
     for col in ("island", "area m²", "radius m"):
@@ -236,24 +252,29 @@ def cmd_vocabulary(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(cov, indent=1))
             return 0
-        t = Table(title=f"HM3DSem v0.2 labels through ovon's cleaning ({cov['instances']:,} instances, "
-                        f"{cov['labels']:,} raw labels)")
+        t = Table(
+            title=f"HM3DSem v0.2 labels through ovon's cleaning ({cov['instances']:,} instances, "
+            f"{cov['labels']:,} raw labels)"
+        )
         for col in ("outcome", "instances", "share", "labels", "largest labels"):
             t.add_column(col, justify="left" if col in ("outcome", "largest labels") else "right")
         for k, n in cov["instances_by_outcome"].items():
             top = ", ".join(f"{r} ({c})" for r, c in cov["top_labels"][k][:6])
             t.add_row(k, f"{n:,}", f"{100 * cov['share_by_outcome'][k]:.1f}%", str(cov["labels_by_outcome"][k]), top)
         console.print(t)
-        console.print(f"mapped instances fall in {cov['categories']} of the {len(vocab)} vocabulary categories; "
-                      "only mapped labels become goal categories")
+        console.print(
+            f"mapped instances fall in {cov['categories']} of the {len(vocab)} vocabulary categories; "
+            "only mapped labels become goal categories"
+        )
         return 0
     table = Table(title="Vocabulary")
     for col in ("name", "family", "placement", "HM3DSem n", "raw labels"):
         table.add_column(col)
     for name in vocab.names:
         c = vocab[name]
-        table.add_row(c.name, c.family, c.placement, str(c.hm3dsem_instances),
-                      ", ".join(r for r in c.raw_labels if r != c.name))
+        table.add_row(
+            c.name, c.family, c.placement, str(c.hm3dsem_instances), ", ".join(r for r in c.raw_labels if r != c.name)
+        )
     console.print(table)
     console.print(f"{len(vocab)} categories, {len({c.family for c in vocab.categories.values()})} shape families")
     return 0
@@ -273,8 +294,10 @@ def check_up_option(up: str | None, scene: str | None = None) -> None:
     expected = f"one of {axes} or three numbers x,y,z (a non-zero vector)"
     t = up.strip().lower()
     if not t:
-        raise ConfigError(f"--up {up!r} is empty; expected {expected}; fix: e.g. --up z, or leave --up out (the "
-                          "habitat config's up axis, else y)")
+        raise ConfigError(
+            f"--up {up!r} is empty; expected {expected}; fix: e.g. --up z, or leave --up out (the "
+            "habitat config's up axis, else y)"
+        )
     parts = t.split(",")
     if t not in AXES and len(parts) == 3:
         try:
@@ -284,21 +307,28 @@ def check_up_option(up: str | None, scene: str | None = None) -> None:
         if v and not all(math.isfinite(x) for x in v):
             raise ConfigError(f"--up {up!r}: expected three finite numbers x,y,z; fix: e.g. --up 0,0,1")
         if v and math.hypot(*v) < 1e-9:
-            raise ConfigError(f"--up {up!r} is the zero vector, which points nowhere; expected three numbers x,y,z "
-                              "not all zero (the scene's up direction); fix: e.g. --up 0,0,1 for a z-up scan")
+            raise ConfigError(
+                f"--up {up!r} is the zero vector, which points nowhere; expected three numbers x,y,z "
+                "not all zero (the scene's up direction); fix: e.g. --up 0,0,1 for a z-up scan"
+            )
     try:
         parse_up(up)
     except ValueError:
         raise ConfigError(f"--up {up!r}: expected {expected}; fix: e.g. --up z for a z-up scan") from None
     if scene is not None and str(scene).startswith("procedural:"):
-        raise ConfigError(f"--up {up}: procedural houses ({scene}) are built y-up already, --up would be ignored; "
-                          "fix: drop --up")
+        raise ConfigError(
+            f"--up {up}: procedural houses ({scene}) are built y-up already, --up would be ignored; fix: drop --up"
+        )
 
 
 def add_up_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--up", default=None, metavar="AXIS",
-                   help="up axis of a scan / bare mesh: y, z, -z, x, ... or x,y,z (default: the habitat "
-                        "stage/scene-dataset config, else y)")
+    p.add_argument(
+        "--up",
+        default=None,
+        metavar="AXIS",
+        help="up axis of a scan / bare mesh: y, z, -z, x, ... or x,y,z (default: the habitat "
+        "stage/scene-dataset config, else y)",
+    )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -307,20 +337,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     g = sub.add_parser("generate", help="write procedural houses in the HM3D layout DIR/<split>/<NNNNN-id>/")
     g.add_argument("--split", choices=sorted(SPLIT_BASE), default="train")
-    g.add_argument("--count", required=True,
-                   help=f"number of houses in the split (1 to {SPLIT_CAPACITY['train']} train, "
-                        f"{SPLIT_CAPACITY['val']} val)")
+    g.add_argument(
+        "--count",
+        required=True,
+        help=f"number of houses in the split (1 to {SPLIT_CAPACITY['train']} train, {SPLIT_CAPACITY['val']} val)",
+    )
     g.add_argument("--seed", default=0, help=f"dataset seed (0 to {MAX_DATASET_SEED}); house seeds derive from it")
     g.add_argument("--out", required=True, help="dataset folder (DATASET_DIR)")
     g.add_argument("--workers", default=None, help="worker processes (default: min(2, cpus))")
     g.set_defaults(func=cmd_generate)
 
-    i = sub.add_parser("inspect", help="print a summary of one scene (folder or any of its files) or of a habitat "
-                                       "navmesh (X.navmesh: navigable area and islands as habitat computes them)")
+    i = sub.add_parser(
+        "inspect",
+        help="print a summary of one scene (folder or any of its files) or of a habitat "
+        "navmesh (X.navmesh: navigable area and islands as habitat computes them)",
+    )
     i.add_argument("path")
     i.add_argument("--json", action="store_true", help="print the summary as JSON")
-    i.add_argument("--nav", action="store_true", help="also build navigability: area, islands per floor (from the "
-                   "navmesh beside the mesh when there is one, see sim.nav.source)")
+    i.add_argument(
+        "--nav",
+        action="store_true",
+        help="also build navigability: area, islands per floor (from the "
+        "navmesh beside the mesh when there is one, see sim.nav.source)",
+    )
     add_up_argument(i)
     i.set_defaults(func=cmd_inspect)
 
@@ -337,7 +376,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ls.set_defaults(func=cmd_list)
 
     v = sub.add_parser("vocabulary", help="print the categories (name, family, placement, HM3DSem count)")
-    v.add_argument("--coverage", action="store_true",
-                   help="share of HM3DSem v0.2 instances mapped / structural / free text / unmapped")
+    v.add_argument(
+        "--coverage",
+        action="store_true",
+        help="share of HM3DSem v0.2 instances mapped / structural / free text / unmapped",
+    )
     v.add_argument("--json", action="store_true", help="with --coverage: print it as JSON")
     v.set_defaults(func=cmd_vocabulary)

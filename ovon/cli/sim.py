@@ -32,8 +32,9 @@ class ViewArgs:
     pose: tuple[float, float, float, float] | None = constrained(None, PoseDomain(), flag="--pose")
     pitch: float = in_range(0.0, -90.0, 90.0, flag="--pitch")
     seed: int = non_negative(0, flag="--seed")
-    out: str = constrained("", Pattern(r"(?s).*[^/\\]\.[pP][nN][gG]", "the path of a .png file, e.g. frame.png"),
-                           flag="--out")
+    out: str = constrained(
+        "", Pattern(r"(?s).*[^/\\]\.[pP][nN][gG]", "the path of a .png file, e.g. frame.png"), flag="--out"
+    )
 
 
 @dataclass(frozen=True)
@@ -63,8 +64,9 @@ def register(sub) -> None:
     gs = g.add_subparsers(dest="sim_command", required=True)
 
     v = gs.add_parser("view", help="render RGB | depth | semantic at a pose into one PNG")
-    v.add_argument("scene", help="scene folder/file (HM3DSem layout, or a bare .glb/.gltf/.ply/.obj) or "
-                                 "procedural:<seed>")
+    v.add_argument(
+        "scene", help="scene folder/file (HM3DSem layout, or a bare .glb/.gltf/.ply/.obj) or procedural:<seed>"
+    )
     # "-3,0,2,90" is a value, not an option: let the pose start with a minus sign
     v._negative_number_matcher = re.compile(r"^-\d[\d.,eE+-]*$")
     v.add_argument("--pose", help="x,y,z,yaw_deg of the agent's feet (default: a random navigable pose)")
@@ -75,14 +77,16 @@ def register(sub) -> None:
     v.add_argument("--out", required=True, help="output .png path")
     v.set_defaults(func=cmd_view)
 
-    b = gs.add_parser("bench", help="env steps/s (random moves and turns, auto-reset; depth, semantic and RGB "
-                                    "unless --no-rgb)")
+    b = gs.add_parser(
+        "bench", help="env steps/s (random moves and turns, auto-reset; depth, semantic and RGB unless --no-rgb)"
+    )
     b.add_argument("--scene", default="procedural:0")
     b.add_argument("--goal", help="goal category (default: the scene's most frequent floor object)")
     _camera_args(b)
     b.add_argument("--no-rgb", action="store_true", help="skip the RGB channel (what oracle encoders need)")
-    b.add_argument("--workers", default=1,
-                   help="worker processes of the vector env; 0: one env stepped in this process")
+    b.add_argument(
+        "--workers", default=1, help="worker processes of the vector env; 0: one env stepped in this process"
+    )
     b.add_argument("--envs-per-worker", default=4, help="envs hosted by each worker process")
     b.add_argument("--steps", default=1000, help="timed env steps over all envs")
     b.add_argument("--seed", default=0)
@@ -158,8 +162,10 @@ def cmd_view(args) -> int:
         rng = np.random.default_rng(a.seed)
         grids = [g for g in nav.floors if g.navigable.any()]
         if not grids:
-            raise ValueError(f"scene {args.scene!r} has no navigable area for a random pose; pass --pose x,y,z,yaw "
-                             "(or --up if the scene is rotated)")
+            raise ValueError(
+                f"scene {args.scene!r} has no navigable area for a random pose; pass --pose x,y,z,yaw "
+                "(or --up if the scene is rotated)"
+            )
         pos = grids[int(rng.integers(len(grids)))].random_point(rng)
         yaw = float(rng.uniform(-math.pi, math.pi))
     renderer = make_renderer(scene, cam)
@@ -174,8 +180,10 @@ def cmd_view(args) -> int:
     out = Path(a.out)
     atomic_write_with(out, lambda f: Image.fromarray(panel).save(f, format="PNG"))  # never a torn PNG
     n_ids = len(np.unique(frame.semantic[frame.semantic > 0]))
-    print(f"pose x={pos[0]:.3f} y={pos[1]:.3f} z={pos[2]:.3f} yaw={math.degrees(yaw):.1f} deg "
-          f"pitch={a.pitch:.1f} deg; {n_ids} instances in view")
+    print(
+        f"pose x={pos[0]:.3f} y={pos[1]:.3f} z={pos[2]:.3f} yaw={math.degrees(yaw):.1f} deg "
+        f"pitch={a.pitch:.1f} deg; {n_ids} instances in view"
+    )
     print(f"wrote {out} ({panel.shape[1]}x{panel.shape[0]}: rgb | depth | semantic)")
     return 0
 
@@ -197,8 +205,10 @@ def cmd_bench(args) -> int:
     r = measure_throughput(recipe, workers=a.workers, envs=envs, steps=a.steps, seed=a.seed)
     where = "in this process" if a.workers == 0 else f"{r['envs']} envs on {r['workers']} worker(s)"
     channels = "depth+semantic" if args.no_rgb else "rgb+depth+semantic"
-    print(f"scene {a.scene}, goal {goal!r}, {args.width}x{args.height} {channels}, backend {args.backend}, "
-          f"{where}: {r['steps']} steps in {r['seconds']:.2f} s (setup {r['setup_s']:.1f} s, "
-          f"{r['cpu_ms_per_step']:.2f} CPU ms/step)")
+    print(
+        f"scene {a.scene}, goal {goal!r}, {args.width}x{args.height} {channels}, backend {args.backend}, "
+        f"{where}: {r['steps']} steps in {r['seconds']:.2f} s (setup {r['setup_s']:.1f} s, "
+        f"{r['cpu_ms_per_step']:.2f} CPU ms/step)"
+    )
     print(f"{r['steps_per_s']:.1f} steps/s")
     return 0

@@ -21,26 +21,46 @@ class TrainArgs:
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a learned baseline (bc | dagger | ppo); works under torchrun")
     p.add_argument("--algo", choices=["bc", "dagger", "ppo"], required=True)
-    p.add_argument("--task", choices=["objectnav", "pointnav"], default="objectnav",
-                   help="objectnav (goal text) or pointnav (goal point from odometry; PPO, --procedural houses); "
-                        "picks that task's version of --preset")
+    p.add_argument(
+        "--task",
+        choices=["objectnav", "pointnav"],
+        default="objectnav",
+        help="objectnav (goal text) or pointnav (goal point from odometry; PPO, --procedural houses); "
+        "picks that task's version of --preset",
+    )
     p.add_argument("--policy", choices=["transformer", "lstm"], default=None, help="policy core (default: preset)")
-    p.add_argument("--encoder", choices=["oracle-vl", "siglip", "cnn", "depth-grid"], default=None,
-                   help="image encoder (default: preset; oracle-vl is ORACLE PERCEPTION)")
-    p.add_argument("--expert", choices=["frontier", "shortest-path"], default=None,
-                   help="expert for BC recording / DAgger labels (default: frontier)")
+    p.add_argument(
+        "--encoder",
+        choices=["oracle-vl", "siglip", "cnn", "depth-grid"],
+        default=None,
+        help="image encoder (default: preset; oracle-vl is ORACLE PERCEPTION)",
+    )
+    p.add_argument(
+        "--expert",
+        choices=["frontier", "shortest-path"],
+        default=None,
+        help="expert for BC recording / DAgger labels (default: frontier)",
+    )
     p.add_argument("--init", help="policy.pt (or run folder) to start from; with --algo ppo: BC/DAgger->RL")
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint.pt exactly")
     p.add_argument("--data", help="episode dataset root (holds train/ ...)")
     p.add_argument("--scenes", help="scene-datasets root")
     p.add_argument("--split", default="train")
     p.add_argument("--episodes", default=None, help="use at most this many episodes of the split (an integer > 0)")
-    p.add_argument("--procedural", metavar="SEEDS",
-                   help="ad-hoc episodes on procedural houses instead of a dataset, e.g. 0-7 or 0,3")
+    p.add_argument(
+        "--procedural",
+        metavar="SEEDS",
+        help="ad-hoc episodes on procedural houses instead of a dataset, e.g. 0-7 or 0,3",
+    )
     p.add_argument("--preset", choices=["paper", "cpu-small", "tiny"], default="cpu-small")
     p.add_argument("--config", help="YAML file merged over the preset")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override, e.g. num_envs=8 ppo.clip=0.1 policy.layers=2 bc.shards=DIR")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override, e.g. num_envs=8 ppo.clip=0.1 policy.layers=2 bc.shards=DIR",
+    )
     p.add_argument("--out", required=True, help="run folder (checkpoint.pt, policy.pt, metrics.jsonl, tb/)")
     p.set_defaults(func=cmd_train)
 
@@ -60,8 +80,10 @@ def check_args(args) -> TrainArgs:
     from ovon.config.base import ConfigError, from_args
 
     if args.config and Path(args.config).is_dir():
-        raise ConfigError(f"--config {args.config!r} is a folder, not a YAML file; fix: pass the path of a YAML "
-                          "file of TrainConfig keys")
+        raise ConfigError(
+            f"--config {args.config!r} is a folder, not a YAML file; fix: pass the path of a YAML "
+            "file of TrainConfig keys"
+        )
     a = from_args(TrainArgs, args)
     check_output_path(args.out, "--out", folder=True)
     return a
@@ -76,8 +98,14 @@ def cmd_train(args) -> int:
     a = check_args(args)
     cfg = build_config(args)
     out = Path(args.out)
-    source = EpisodeSource(data=args.data, scenes=args.scenes, split=args.split, limit=a.episodes,
-                           procedural=args.procedural, task=args.task)
+    source = EpisodeSource(
+        data=args.data,
+        scenes=args.scenes,
+        split=args.split,
+        limit=a.episodes,
+        procedural=args.procedural,
+        task=args.task,
+    )
     last = train(cfg, source, out, resume=args.resume, init=args.init)  # opens, checks and locks --out
     if int(os.environ.get("RANK", "0")) == 0:
         shown = {k: round(v, 4) for k, v in last.items() if isinstance(v, float)}

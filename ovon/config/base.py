@@ -86,8 +86,7 @@ class Range(Domain):
             return f"{noun} {'>' if self.lo_open else '>='} {_num(self.lo)}" if self.lo is not None else noun
         if self.lo is None:
             return f"{noun} {'<' if self.hi_open else '<='} {_num(self.hi)}"
-        return (f"{noun} in {'(' if self.lo_open else '['}{_num(self.lo)}, {_num(self.hi)}"
-                f"{')' if self.hi_open else ']'}")
+        return f"{noun} in {'(' if self.lo_open else '['}{_num(self.lo)}, {_num(self.hi)}{')' if self.hi_open else ']'}"
 
 
 def Positive() -> Range:  # noqa: N802 - reads as a domain name
@@ -220,8 +219,9 @@ def rule(keys: tuple[str, ...], test: Callable[..., bool], expected: str) -> Rul
 # field helpers: `width: int = positive(360)`
 
 
-def constrained(default: Any = MISSING, domain: Domain | None = None, *, default_factory: Any = MISSING,
-                flag: str | None = None) -> Any:
+def constrained(
+    default: Any = MISSING, domain: Domain | None = None, *, default_factory: Any = MISSING, flag: str | None = None
+) -> Any:
     """A dataclass field whose values must lie in `domain` (checked by `validate`)."""
     meta = {"domain": domain, "flag": flag}
     if default_factory is not MISSING:
@@ -242,8 +242,9 @@ def non_negative(default: Any = MISSING, **kw: Any) -> Any:
     return constrained(default, NonNegative(), **kw)
 
 
-def in_range(default: Any, lo: float | None, hi: float | None, *, lo_open: bool = False, hi_open: bool = False,
-             **kw: Any) -> Any:
+def in_range(
+    default: Any, lo: float | None, hi: float | None, *, lo_open: bool = False, hi_open: bool = False, **kw: Any
+) -> Any:
     return constrained(default, Range(lo, hi, lo_open, hi_open), **kw)
 
 
@@ -303,7 +304,7 @@ def _noun(tp: Any) -> str:
 def _plural(noun: str) -> str:
     for a, b in (("an integer", "integers"), ("a number", "numbers"), ("a string", "strings")):
         if noun.startswith(a):
-            return b + noun[len(a):]
+            return b + noun[len(a) :]
     return noun
 
 
@@ -506,7 +507,7 @@ def _in_file(key: str) -> tuple[str, str] | None:
         return None
     for sep in (":", "."):
         if key.startswith(source + sep):
-            return source, key[len(source) + 1:]
+            return source, key[len(source) + 1 :]
     return source, key
 
 
@@ -588,8 +589,10 @@ def _not_a_config(owner: type, key: str, value: Any, sub: type) -> str:
     kind = type(value).__name__
     got = f"{'an' if kind[:1].lower() in 'aeiou' else 'a'} {kind}"
     if isinstance(value, Mapping):
-        how = (f"pass {sub.__name__}(...) there, or build the whole config with from_dict({owner.__name__}, "
-               "{...}), which reads nested mappings")
+        how = (
+            f"pass {sub.__name__}(...) there, or build the whole config with from_dict({owner.__name__}, "
+            "{...}), which reads nested mappings"
+        )
     else:
         how = f"pass {sub.__name__}(...) there"
     return f"{_shown_key(key)} = {_short(value)}: expected a {sub.__name__}, got {got}; fix: {how}"
@@ -610,9 +613,11 @@ def _check_keys(data: Mapping[Any, Any], valid: list[str], where: str, cls: type
     odd = [k for k in data if not isinstance(k, str)]
     if odd:
         k = odd[0]
-        raise ConfigError(f"config key {_short(k)} ({type(k).__name__}) of {where or cls.__name__} is not a name; "
-                          f"valid keys{' of ' + where if where else ''}: {', '.join(valid)}; fix: use those names "
-                          "(strings) as keys")
+        raise ConfigError(
+            f"config key {_short(k)} ({type(k).__name__}) of {where or cls.__name__} is not a name; "
+            f"valid keys{' of ' + where if where else ''}: {', '.join(valid)}; fix: use those names "
+            "(strings) as keys"
+        )
     unknown = set(data) - set(valid)
     if unknown:
         raise _unknown(unknown, valid, where)
@@ -624,8 +629,9 @@ def _unknown(unknown: set[str], valid: list[str], where: str) -> ConfigError:
         close = difflib.get_close_matches(k, valid, n=1)
         key = _shown_key(f"{where}.{k}" if where else k)
         hints.append(key + (f" (did you mean {close[0]!r}?)" if close else ""))
-    return ConfigError(f"unknown config key(s) {', '.join(hints)}; valid keys{' of ' + where if where else ''}: "
-                       f"{', '.join(valid)}")
+    return ConfigError(
+        f"unknown config key(s) {', '.join(hints)}; valid keys{' of ' + where if where else ''}: {', '.join(valid)}"
+    )
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -674,8 +680,13 @@ def violations(cfg: Any, where: str = "") -> list[str]:
             expected = " ".join(f"{prefix}{t}" if t in r.keys else t for t in r.expected.split(" "))
             found = _in_file(prefix + r.keys[0])
             option = _VALUES_OPTION.get()
-            how = (f"pass {option} KEY=VALUE for them" if option is not None
-                   else "--set the values" if found is None else f"edit {found[0]}")
+            how = (
+                f"pass {option} KEY=VALUE for them"
+                if option is not None
+                else "--set the values"
+                if found is None
+                else f"edit {found[0]}"
+            )
             out.append(f"{values}: expected {expected}; fix: {how} so that {expected} holds")
     return out
 
@@ -687,8 +698,9 @@ def validate(cfg: T, where: str = "") -> T:
     objects in str fields are stored as their str (in place), as `from_dict` does."""
     problems = violations(cfg, where)
     if problems:
-        raise ConfigError(problems[0] if len(problems) == 1
-                          else f"{len(problems)} invalid config values: " + " | ".join(problems))
+        raise ConfigError(
+            problems[0] if len(problems) == 1 else f"{len(problems)} invalid config values: " + " | ".join(problems)
+        )
     _paths_as_str(cfg)
     return cfg
 
@@ -702,8 +714,10 @@ def _coerce_field(cls: type, f: dataclasses.Field, tp: Any, value: Any, key: str
         if isinstance(value, tp):
             return value
         if not isinstance(value, dict):
-            raise ConfigError(f"{_shown_key(key)} = {_short(value)}: expected a mapping of {tp.__name__} fields "
-                              f"({', '.join(x.name for x in dataclasses.fields(tp))}); fix: {_fix_group(key)}")
+            raise ConfigError(
+                f"{_shown_key(key)} = {_short(value)}: expected a mapping of {tp.__name__} fields "
+                f"({', '.join(x.name for x in dataclasses.fields(tp))}); fix: {_fix_group(key)}"
+            )
         return _from_dict(tp, value, key)
     try:
         return _coerce(value, tp, key)
@@ -742,8 +756,10 @@ def to_dict(cfg: Any) -> dict[str, Any]:
 
 def _merge(cfg: T, data: Mapping[str, Any], where: str) -> T:
     if not isinstance(data, Mapping):
-        raise ConfigError(f"{where or type(cfg).__name__} = {_short(data)}: expected a mapping of "
-                          f"{type(cfg).__name__} fields; fix: {_fix_group(where)}")
+        raise ConfigError(
+            f"{where or type(cfg).__name__} = {_short(data)}: expected a mapping of "
+            f"{type(cfg).__name__} fields; fix: {_fix_group(where)}"
+        )
     types_ = _field_types(type(cfg))
     _check_keys(data, sorted(types_), where, type(cfg))
     fields = {f.name: f for f in dataclasses.fields(cfg)}
@@ -782,19 +798,24 @@ def parse_overrides(items: list[str] | tuple[str, ...]) -> dict[str, Any]:
         key, raw = item.split("=", 1)
         parts = key.strip().split(".")
         if any(not p.strip() for p in parts):
-            raise ConfigError(f"override {item!r}: empty key part in {key.strip()!r}; fix: e.g. "
-                              "--set sim.camera.width=160")
+            raise ConfigError(
+                f"override {item!r}: empty key part in {key.strip()!r}; fix: e.g. --set sim.camera.width=160"
+            )
         value = _yaml_scalar(raw)
         node = out
         for i, p in enumerate(parts[:-1]):
             nxt = node.setdefault(p, {})
             if not isinstance(nxt, dict):
-                raise ConfigError(f"override {item!r}: {'.'.join(parts[: i + 1])} is set both as a value and as "
-                                  "a group; fix: set each key once")
+                raise ConfigError(
+                    f"override {item!r}: {'.'.join(parts[: i + 1])} is set both as a value and as "
+                    "a group; fix: set each key once"
+                )
             node = nxt
         if isinstance(node.get(parts[-1]), dict):
-            raise ConfigError(f"override {item!r}: {key.strip()} is a group of keys; fix: set one of its fields, "
-                              f"e.g. --set {key.strip()}.FIELD=VALUE")
+            raise ConfigError(
+                f"override {item!r}: {key.strip()} is a group of keys; fix: set one of its fields, "
+                f"e.g. --set {key.strip()}.FIELD=VALUE"
+            )
         node[parts[-1]] = value
     return out
 
@@ -811,8 +832,10 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
         first = " ".join(str(e).split())[:200]
         raise ConfigError(f"config file {path} is not valid YAML ({first}); fix: correct the file") from None
     if not isinstance(data, dict):
-        raise ConfigError(f"config file {path} must hold a mapping of config keys at the top level, got "
-                          f"{type(data).__name__}; fix: write `key: value` lines")
+        raise ConfigError(
+            f"config file {path} must hold a mapping of config keys at the top level, got "
+            f"{type(data).__name__}; fix: write `key: value` lines"
+        )
     return data
 
 

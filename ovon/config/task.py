@@ -68,5 +68,11 @@ def pointnav_task() -> TaskConfig:
     """The PointNav task of the training presets and of `ovon evaluate --task pointnav` without a checkpoint:
     success within 0.36 m (2 agent radii, habitat's PointNav challenge), 150 steps, goals 1-6 m away, and a
     failed STOP costs 1 (habitat: 0; without it PPO collapsed to STOP-at-once, README "Learned PointNav")."""
-    return TaskConfig(kind="pointnav", max_steps=150, success_distance=0.36, point_min_distance_m=1.0,
-                      point_max_distance_m=6.0, reward=RewardConfig(dense_failed_stop=-1.0))
+    return TaskConfig(
+        kind="pointnav",
+        max_steps=150,
+        success_distance=0.36,
+        point_min_distance_m=1.0,
+        point_max_distance_m=6.0,
+        reward=RewardConfig(dense_failed_stop=-1.0),
+    )

@@ -93,9 +93,12 @@ def scene_categories(ref: SceneRef) -> set[str]:
 
     entries = parse_semantic_txt(txt)
     if not entries:
-        raise SceneFileError(txt, "holds no annotated instance (ObjectNav episodes need the scene's objects)",
-                             f"fix: expected a first line '{SEMANTIC_HEADER}', then {SEMANTIC_LINE_FORMAT} per "
-                             "instance; restore the file or move the scene out of the scenes folder")
+        raise SceneFileError(
+            txt,
+            "holds no annotated instance (ObjectNav episodes need the scene's objects)",
+            f"fix: expected a first line '{SEMANTIC_HEADER}', then {SEMANTIC_LINE_FORMAT} per "
+            "instance; restore the file or move the scene out of the scenes folder",
+        )
     return {c for e in entries if (c := vocab.clean(e.raw_label))}
 
 
@@ -108,8 +111,7 @@ def _r(v, nd: int) -> list[float]:
 
 
 # -- phase 1: goals of one scene ----------------------------------------------------------------
-def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str],
-                  nav_cache: Path | None = None) -> dict:
+def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str], nav_cache: Path | None = None) -> dict:
     """{category: [goal dict]} for the scene plus the reasons objects were not goals (`nav_cache`: the
     folder of the on-disk navigation-grid cache, shared with phase 2)."""
     from ovon.dataset.viewpoints import object_viewpoints
@@ -120,8 +122,13 @@ def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str],
     scene = load_scene_any(ref.folder)
     nav = build_navigation(scene, AgentConfig(), NavConfig(), cache_dir=nav_cache)
     vc = cfg.viewpoints
-    cam = CameraConfig(width=vc.render_size, height=vc.render_size, hfov_deg=vc.hfov_deg,
-                       camera_height=vc.camera_height, backend=vc.backend)  # type: ignore[arg-type]
+    cam = CameraConfig(
+        width=vc.render_size,
+        height=vc.render_size,
+        hfov_deg=vc.hfov_deg,
+        camera_height=vc.camera_height,
+        backend=vc.backend,
+    )  # type: ignore[arg-type]
     renderer = make_renderer(scene, cam)
     wanted = set(categories)
     reasons: Counter = Counter()
@@ -156,8 +163,11 @@ def compute_goals(ref: SceneRef, cfg: GenerationConfig, categories: list[str],
             )
     finally:
         renderer.close()
-    return {"goals": goals, "not_goal_reasons": dict(sorted(reasons.items())),
-            "floor_m2": round(start_area(nav, cfg.starts.min_island_radius), 2)}
+    return {
+        "goals": goals,
+        "not_goal_reasons": dict(sorted(reasons.items())),
+        "floor_m2": round(start_area(nav, cfg.starts.min_island_radius), 2),
+    }
 
 
 def start_area(nav, min_island_radius: float) -> float:  # noqa: ANN001 - a SceneNav
@@ -231,8 +241,13 @@ def episodes_job(job: dict) -> dict:
         grid = nav.floors[main_floor]
         fld = distance_field(grid, vps)
         oracle_vps = [(np.asarray(vp["position"], dtype=np.float64), quat_to_yaw(vp["rotation"])) for vp in on_floor]
-        per_cat[cat] = (cats, grid, fld, vps, _oracle_accept(grid, fld, oracle_vps, cfg) if cfg.starts.oracle_check
-                        else None)
+        per_cat[cat] = (
+            cats,
+            grid,
+            fld,
+            vps,
+            _oracle_accept(grid, fld, oracle_vps, cfg) if cfg.starts.oracle_check else None,
+        )
     dropped = set()
     while queue:
         for cat in list(queue):
@@ -251,8 +266,10 @@ def episodes_job(job: dict) -> dict:
                     start_position=_r(start.position, nd),
                     start_rotation=_r(yaw_to_quat(start.yaw), nd),
                     object_category=cat,
-                    info={"geodesic_distance": round(start.geodesic, nd),
-                          "euclidean_distance": round(start.euclidean, nd)},
+                    info={
+                        "geodesic_distance": round(start.geodesic, nd),
+                        "euclidean_distance": round(start.euclidean, nd),
+                    },
                     children_object_categories=cats[1:],
                 )
             )
@@ -263,16 +280,24 @@ def episodes_job(job: dict) -> dict:
     base = Path(ref.scene_id).name
     gbc = {
         goal_key(base, c): [
-            ObjectGoal(g["object_category"], g["object_id"], g["position"],
-                       [ViewPoint(vp["position"], vp["rotation"], vp["iou"]) for vp in g["view_points"]])
+            ObjectGoal(
+                g["object_category"],
+                g["object_id"],
+                g["position"],
+                [ViewPoint(vp["position"], vp["rotation"], vp["iou"]) for vp in g["view_points"]],
+            )
             for g in goals[c]
         ]
         for c in sorted(used)
     }
     write_scene_shard(out, split, ref.stem, episodes, gbc)
     return {
-        "stem": ref.stem, "split": split, "cached": False, "episodes": len(episodes),
-        "seconds": round(time.perf_counter() - t0, 3), "rejections": dict(reasons),
+        "stem": ref.stem,
+        "split": split,
+        "cached": False,
+        "episodes": len(episodes),
+        "seconds": round(time.perf_counter() - t0, 3),
+        "rejections": dict(reasons),
         "dropped_categories": sorted(dropped),
     }
 
@@ -288,8 +313,16 @@ def _oracle_accept(grid, fld, oracle_vps: list, cfg: GenerationConfig):  # noqa:
 
     def accept(p: np.ndarray, yaw: float) -> bool:
         pos = np.asarray(_r(p, nd), dtype=np.float64)
-        return oracle_finishes(grid, pos, quat_to_yaw(_r(yaw_to_quat(yaw), nd)), oracle_vps, fld,
-                               task.max_steps, task.success_distance, AgentConfig())
+        return oracle_finishes(
+            grid,
+            pos,
+            quat_to_yaw(_r(yaw_to_quat(yaw), nd)),
+            oracle_vps,
+            fld,
+            task.max_steps,
+            task.success_distance,
+            AgentConfig(),
+        )
 
     return accept
 
@@ -325,16 +358,19 @@ def _no_goal_reason(g: dict) -> str:
     """Why a scene's goal cache holds no goal (`compute_goals`)."""
     if g.get("floor_m2") == 0:
         a = AgentConfig()
-        return (f"no navigable floor for the agent (radius {a.radius} m, height {a.height} m; furniture tops and "
-                "tiny islands aside): check the scene's up axis, scale and face winding with `ovon scenes inspect`")
+        return (
+            f"no navigable floor for the agent (radius {a.radius} m, height {a.height} m; furniture tops and "
+            "tiny islands aside): check the scene's up axis, scale and face winding with `ovon scenes inspect`"
+        )
     reasons = g.get("not_goal_reasons") or {}
     if not reasons:
         return "none of its objects is of a category of the requested splits"
     return "no object can be a goal (" + ", ".join(f"{n} {k}" for k, n in sorted(reasons.items())) + ")"
 
 
-def _without_episodes(report: GenerationReport, active: list[SceneRef], scenes_dir: Path, out: Path,
-                      existed: set[str], final: bool) -> None:
+def _without_episodes(
+    report: GenerationReport, active: list[SceneRef], scenes_dir: Path, out: Path, existed: set[str], final: bool
+) -> None:
     """Name the scenes that yield no episode: an error when no scene of a kind the splits need (train or
     val) yields, the generation then leaving none of the files it created; else, once `final`, one warning
     (they are counted in the report)."""
@@ -346,8 +382,10 @@ def _without_episodes(report: GenerationReport, active: list[SceneRef], scenes_d
         by_reason: dict[str, list[str]] = {}
         for scene in sorted(scenes):
             by_reason.setdefault(bad[scene], []).append(scene)
-        return "; ".join(f"{', '.join(sc[:3])}{f' and {len(sc) - 3} more' if len(sc) > 3 else ''}: {why}"
-                         for why, sc in by_reason.items())
+        return "; ".join(
+            f"{', '.join(sc[:3])}{f' and {len(sc) - 3} more' if len(sc) > 3 else ''}: {why}"
+            for why, sc in by_reason.items()
+        )
 
     for kind in sorted({r.kind for r in active}):
         scenes = [f"{r.kind}/{Path(r.folder).name}" for r in active if r.kind == kind]
@@ -357,10 +395,14 @@ def _without_episodes(report: GenerationReport, active: list[SceneRef], scenes_d
                     shutil.rmtree(p) if p.is_dir() else p.unlink()
             raise EmptyGenerationError(
                 f"no {kind} scene of {scenes_dir} yields an episode: {named(scenes)}; fix: repair those scenes or "
-                "pass a scenes folder whose scenes have a navigable floor and annotated objects")
+                "pass a scenes folder whose scenes have a navigable floor and annotated objects"
+            )
     if final:
-        warnings.warn(f"{len(bad)} of {len(active)} scenes of {scenes_dir} yield no episode (counted in "
-                      f"generation_report.json): {named(list(bad))}", stacklevel=3)
+        warnings.warn(
+            f"{len(bad)} of {len(active)} scenes of {scenes_dir} yield no episode (counted in "
+            f"generation_report.json): {named(list(bad))}",
+            stacklevel=3,
+        )
 
 
 @generation_run_folder  # identity, resume check and lock of the output folder (ovon.runfolder)
@@ -391,9 +433,11 @@ def generate(
     for kind in sorted(kinds):
         if not any(r.kind == kind for r in refs):
             need = [s for s in splits if (s == "train") == (kind == "train")]
-            raise EmptyGenerationError(f"{scenes_dir} has no {kind} scenes (expected {Path(scenes_dir) / kind}/"
-                                       f"<NNNNN-id>/) for the split(s) {need}; fix: add scene folders there or "
-                                       "leave those splits out (--split)")
+            raise EmptyGenerationError(
+                f"{scenes_dir} has no {kind} scenes (expected {Path(scenes_dir) / kind}/"
+                f"<NNNNN-id>/) for the split(s) {need}; fix: add scene folders there or "
+                "leave those splits out (--split)"
+            )
     active = [r for r in refs if r.kind in kinds]
     preflight_scenes(active)
     cats_by_scene = {r.stem: scene_categories(r) for r in refs}
@@ -403,12 +447,18 @@ def generate(
     else:
         all_cats = sorted(set().union(*cats_by_scene.values()))
         if not all_cats:
-            raise EmptyGenerationError(f"no scene of {scenes_dir} has an annotated object of a known category (their "
-                                       "semantic.txt labels are all dropped by the cleaning table, e.g. wall, floor); "
-                                       "fix: pass scenes annotated with object labels")
+            raise EmptyGenerationError(
+                f"no scene of {scenes_dir} has an annotated object of a known category (their "
+                "semantic.txt labels are all dropped by the cleaning table, e.g. wall, floor); "
+                "fix: pass scenes annotated with object labels"
+            )
         sc = cfg.splits
-        csplit = split_categories(all_cats, SplitConfig(seed=sc.seed, holdout_fraction=sc.holdout_fraction,
-                                                        similarity_threshold=sc.similarity_threshold))
+        csplit = split_categories(
+            all_cats,
+            SplitConfig(
+                seed=sc.seed, holdout_fraction=sc.holdout_fraction, similarity_threshold=sc.similarity_threshold
+            ),
+        )
         csplit.save(cat_path)
     if cat_path != out / "categories.json":
         csplit.save(out / "categories.json")
@@ -434,8 +484,9 @@ def generate(
     for g in goals.values():
         report.not_goal_reasons.update(g["not_goal_reasons"])
     name = {r.stem: f"{r.kind}/{Path(r.folder).name}" for r in active}
-    report.without_episodes = {name[r.stem]: _no_goal_reason(goals[r.stem]) for r in active
-                               if not goals[r.stem]["goals"]}
+    report.without_episodes = {
+        name[r.stem]: _no_goal_reason(goals[r.stem]) for r in active if not goals[r.stem]["goals"]
+    }
     _without_episodes(report, active, Path(scenes_dir), out, existed, final=False)
 
     # phase 2: allocation + starts
@@ -451,8 +502,16 @@ def generate(
             flat = largest_remainder(cfg.episodes_per_val_split, pairs)
             allocs = {s: {c: flat[(s, c)] for c in cs} for s, cs in eligible.items()}
         for r in scene_refs:
-            ep_jobs.append({"ref": r.__dict__, "out": str(out), "cfg": cfg_d, "split": split,
-                            "allocation": allocs[r.stem], "children": children[split]})
+            ep_jobs.append(
+                {
+                    "ref": r.__dict__,
+                    "out": str(out),
+                    "cfg": cfg_d,
+                    "split": split,
+                    "allocation": allocs[r.stem],
+                    "children": children[split],
+                }
+            )
         write_split_shell(out, split)
     allocated = {(j["ref"]["stem"], j["split"]): j["allocation"] for j in ep_jobs}
     yielded: dict[str, bool] = {}  # stem -> an episode (or a shard from an earlier session), False: none

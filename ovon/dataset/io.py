@@ -83,8 +83,9 @@ def _read_json_gz(path: Path) -> Any:
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise DatasetError(f"{path}: not valid JSON ({e}); fix: regenerate or re-download the file") from None
     except RecursionError:
-        raise DatasetError(f"{path}: JSON nested too deeply to be an episode file; fix: regenerate or "
-                           "re-download the file") from None
+        raise DatasetError(
+            f"{path}: JSON nested too deeply to be an episode file; fix: regenerate or re-download the file"
+        ) from None
 
 
 def parse_shard(doc: Any, require_goals: bool = True) -> SceneEpisodes:
@@ -136,13 +137,17 @@ def resolve_split_dir(root: str | Path, split: str) -> Path:
     for c in cand:
         if c.is_dir():
             return c
-    present = sorted(p.name for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")) if root.is_dir() \
-        else []
+    present = (
+        sorted(p.name for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")) if root.is_dir() else []
+    )
     raise FileNotFoundError(
         f"split {split!r} not found: tried {', '.join(str(c) for c in cand)}; "
-        + (f"splits present under {root}: {present}; fix: name one of them (--splits), or point --data at the "
-           "dataset root that holds the split's folder" if root.is_dir()
-           else f"{root} does not exist; fix: point --data at the dataset root (it holds val_seen/ ...)")
+        + (
+            f"splits present under {root}: {present}; fix: name one of them (--splits), or point --data at the "
+            "dataset root that holds the split's folder"
+            if root.is_dir()
+            else f"{root} does not exist; fix: point --data at the dataset root (it holds val_seen/ ...)"
+        )
     )
 
 

@@ -46,8 +46,9 @@ MAX_COORDINATE = 1e5
 def _position(v: Any, where: str) -> list[float]:
     out = _numbers(v, 3, where)
     if any(abs(x) > MAX_COORDINATE for x in out):
-        raise DatasetError(f"{where}: expected 3 coordinates within ±{MAX_COORDINATE:g} m of the scene's origin, "
-                           f"got {_short(v)}")
+        raise DatasetError(
+            f"{where}: expected 3 coordinates within ±{MAX_COORDINATE:g} m of the scene's origin, got {_short(v)}"
+        )
     return out
 
 
@@ -315,8 +316,10 @@ def confined_scene_id(scene_id: str, scenes_root: str | Path) -> str:
     root, or one containing `data/scene_datasets/`, is made relative)."""
     raw = str(scene_id)
     s = strip_scene_prefix(raw)
-    fix = ("fix: scene ids must be paths inside the scenes root (e.g. hm3d/val/00800-TEEsavR23oF/TEEsavR23oF"
-           ".basis.glb); correct the episode file, or pass the scenes root that holds it")
+    fix = (
+        "fix: scene ids must be paths inside the scenes root (e.g. hm3d/val/00800-TEEsavR23oF/TEEsavR23oF"
+        ".basis.glb); correct the episode file, or pass the scenes root that holds it"
+    )
     if "\0" in s or not s.strip():
         raise DatasetError(f"scene_id {raw!r} is not a path; {fix}")
     if posixpath.isabs(s) or PureWindowsPath(s).drive:
@@ -324,11 +327,12 @@ def confined_scene_id(scene_id: str, scenes_root: str | Path) -> str:
         norm = posixpath.normpath(s)
         if norm != root and not norm.startswith(root.rstrip("/") + "/"):
             raise DatasetError(f"scene_id {raw!r} is an absolute path outside the scenes root {root}; {fix}")
-        s = norm[len(root):].lstrip("/")
+        s = norm[len(root) :].lstrip("/")
     rel = posixpath.normpath(s)
     if rel in (".", "") or rel == ".." or rel.startswith("../"):
-        raise DatasetError(f"scene_id {raw!r} points outside the scenes root {scenes_root} ({rel!r} after "
-                           f"normalisation); {fix}")
+        raise DatasetError(
+            f"scene_id {raw!r} points outside the scenes root {scenes_root} ({rel!r} after normalisation); {fix}"
+        )
     return rel
 
 

@@ -122,9 +122,11 @@ class CategorySplit:
                 model=str(doc.get("model", MODEL_NAME)),
             )
         except (KeyError, TypeError, ValueError) as e:
-            raise DatasetError(f"{source}: malformed category split ({type(e).__name__}: {e}); expected lists train, "
-                               "val_seen_synonyms and val_unseen; fix: pass a categories.json written by "
-                               "`ovon dataset splits`") from None
+            raise DatasetError(
+                f"{source}: malformed category split ({type(e).__name__}: {e}); expected lists train, "
+                "val_seen_synonyms and val_unseen; fix: pass a categories.json written by "
+                "`ovon dataset splits`"
+            ) from None
 
     def save(self, path: str | Path) -> Path:
         """Write `categories.json` atomically."""
@@ -178,21 +180,31 @@ def check_category_split(
     for key, names in lists.items():
         twice = sorted(c for c, n in Counter(names).items() if n > 1)
         if twice:
-            raise DatasetError(f"{source}: {key} lists {_shown(twice)} more than once; expected each category once "
-                               f"per list; fix: remove the repeats from {key}")
+            raise DatasetError(
+                f"{source}: {key} lists {_shown(twice)} more than once; expected each category once "
+                f"per list; fix: remove the repeats from {key}"
+            )
     rules = (
         ("val_unseen", "train", "val_unseen disjoint from train (unseen categories are never trained on)"),
-        ("val_seen_synonyms", "train", "val_seen_synonyms disjoint from train (held-out synonyms of train "
-                                       "categories are never trained on)"),
-        ("val_unseen", "val_seen_synonyms", "the held-out lists disjoint (a held-out category is a synonym of "
-                                            "a train category or unseen, not both)"),
+        (
+            "val_seen_synonyms",
+            "train",
+            "val_seen_synonyms disjoint from train (held-out synonyms of train categories are never trained on)",
+        ),
+        (
+            "val_unseen",
+            "val_seen_synonyms",
+            "the held-out lists disjoint (a held-out category is a synonym of a train category or unseen, not both)",
+        ),
     )
     for key, other, expected in rules:
         both = [c for c in lists[key] if c in set(lists[other])]
         if both:
-            raise DatasetError(f"{source}: {key} lists {len(both)} {other} {_categories_word(len(both))} "
-                               f"({_shown(both)}); expected {expected}; fix: remove them from {key} or from "
-                               f"{other}, {SPLITS_FIX}")
+            raise DatasetError(
+                f"{source}: {key} lists {len(both)} {other} {_categories_word(len(both))} "
+                f"({_shown(both)}); expected {expected}; fix: remove them from {key} or from "
+                f"{other}, {SPLITS_FIX}"
+            )
     vocabulary = known is None
     names_known = _vocabulary_names() if known is None else set(known)
     for key, names in lists.items():
@@ -201,19 +213,23 @@ def check_category_split(
             close = difflib.get_close_matches(unknown[0], sorted(names_known), n=1, cutoff=0.8)
             hint = f" (did you mean {close[0]!r} for {unknown[0]!r}?)" if close else ""
             where = "the embedded vocabulary (`ovon scenes vocabulary` lists it)" if vocabulary else "the known ones"
-            raise DatasetError(f"{source}: {key} names {len(unknown)} {_categories_word(len(unknown))} that "
-                               f"{'is' if len(unknown) == 1 else 'are'} not in the "
-                               f"{'vocabulary' if vocabulary else 'known categories'} ({_shown(unknown)}){hint}; "
-                               f"expected category names of {where}: no annotated object can match them; "
-                               f"fix: correct or remove them, {SPLITS_FIX}")
+            raise DatasetError(
+                f"{source}: {key} names {len(unknown)} {_categories_word(len(unknown))} that "
+                f"{'is' if len(unknown) == 1 else 'are'} not in the "
+                f"{'vocabulary' if vocabulary else 'known categories'} ({_shown(unknown)}){hint}; "
+                f"expected category names of {where}: no annotated object can match them; "
+                f"fix: correct or remove them, {SPLITS_FIX}"
+            )
     # train and val_seen episodes draw from the train list, the held-out splits from their own
     needed = dict.fromkeys(["train", *(k if k in HELD_OUT_SPLITS else "train" for k in map(canonical_split, splits))])
     for key in needed:
         if not lists[key]:
-            why = ("the held-out categories are held out from train and val_seen uses its categories"
-                   if key == "train" else f"the {key} split would get no episode")
-            raise DatasetError(f"{source}: {key} is empty ({why}); expected at least one category in {key}; "
-                               f"{fix}")
+            why = (
+                "the held-out categories are held out from train and val_seen uses its categories"
+                if key == "train"
+                else f"the {key} split would get no episode"
+            )
+            raise DatasetError(f"{source}: {key} is empty ({why}); expected at least one category in {key}; {fix}")
     return split
 
 
@@ -232,8 +248,10 @@ def load_category_split(
         raise DatasetError(f"{path}: expected a JSON object with train / val_seen_synonyms / val_unseen; {fix}")
     for key in CATEGORY_LISTS:
         if key in doc and not isinstance(doc[key], list):
-            raise DatasetError(f"{path}: malformed category split: {key} = {str(doc[key])[:60]!r}: expected a list "
-                               f"of categories; {fix}")
+            raise DatasetError(
+                f"{path}: malformed category split: {key} = {str(doc[key])[:60]!r}: expected a list "
+                f"of categories; {fix}"
+            )
     split = CategorySplit.from_json(doc, source=str(path))
     return check_category_split(split, str(path), known=known, splits=splits)
 
@@ -246,8 +264,10 @@ def empty_held_out_problem(split: CategorySplit, n_categories: int, holdout: flo
     held = sorted([*split.val_seen_synonyms, *split.val_unseen], key=lambda h: h.max_similarity)
     if len(held) < 2:
         given = f" {holdout:g}" if holdout is not None else ""
-        return (f"--holdout{given} holds out {len(held)} of the {n_categories} categories; expected at least 2 "
-                "(one for val_seen_synonyms, one for val_unseen); fix: pass a larger --holdout (default 0.25)")
+        return (
+            f"--holdout{given} holds out {len(held)} of the {n_categories} categories; expected at least 2 "
+            "(one for val_seen_synonyms, one for val_unseen); fix: pass a larger --holdout (default 0.25)"
+        )
     empty = "val_unseen" if not split.val_unseen else ("val_seen_synonyms" if not split.val_seen_synonyms else "")
     if not empty:
         return None
@@ -259,8 +279,10 @@ def empty_held_out_problem(split: CategorySplit, n_categories: int, holdout: flo
     else:
         good = 0.68 if sims[0] < 0.68 <= sims[-1] else sims[len(sims) // 2]
         fix = f"a --threshold above {sims[0]:g} and at most {sims[-1]:g}, e.g. --threshold {good:g}"
-    return (f"--threshold {split.threshold:g} puts all {len(held)} held-out categories in {full} ({span}), so "
-            f"{empty} would be empty; expected a threshold inside that range; fix: pass {fix}")
+    return (
+        f"--threshold {split.threshold:g} puts all {len(held)} held-out categories in {full} ({span}), so "
+        f"{empty} would be empty; expected a threshold inside that range; fix: pass {fix}"
+    )
 
 
 def split_categories(

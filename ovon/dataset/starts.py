@@ -32,7 +32,12 @@ class Start:
 
 
 def sample_start(
-    grid, field, viewpoints: np.ndarray, cfg: StartConfig, rng: np.random.Generator, reasons: Counter,
+    grid,
+    field,
+    viewpoints: np.ndarray,
+    cfg: StartConfig,
+    rng: np.random.Generator,
+    reasons: Counter,
     accept: Callable[[np.ndarray, float], bool] | None = None,
 ) -> Start | None:
     """One start for a goal set (all viewpoints of the category and its children on this floor).
@@ -71,8 +76,16 @@ def sample_start(
     return None
 
 
-def oracle_finishes(grid, position, yaw: float, viewpoints: list[tuple[np.ndarray, float]], field,
-                    max_steps: int, success_distance: float, agent=None) -> bool:  # noqa: ANN001
+def oracle_finishes(
+    grid,
+    position,
+    yaw: float,
+    viewpoints: list[tuple[np.ndarray, float]],
+    field,
+    max_steps: int,
+    success_distance: float,
+    agent=None,
+) -> bool:  # noqa: ANN001
     """Whether the shortest-path oracle (`ovon evaluate --agent shortest-path`, noise-free) finishes an
     episode from this start: the same expert and kinematics on the same grid, without rendering.
 

@@ -59,8 +59,10 @@ def split_stats(root: str | Path, split: str) -> dict:
 def _distance(value: object, where: str) -> float:
     """A stored geodesic distance, or one line naming the episode (a string or NaN cannot be averaged)."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
-        raise DatasetError(f"{where}: info.geodesic_distance = {value!r}: expected a finite number >= 0 (metres); "
-                           "fix: correct or remove the episode (`ovon dataset validate` lists every problem)")
+        raise DatasetError(
+            f"{where}: info.geodesic_distance = {value!r}: expected a finite number >= 0 (metres); "
+            "fix: correct or remove the episode (`ovon dataset validate` lists every problem)"
+        )
     return float(value)
 
 
@@ -79,22 +81,28 @@ def dataset_stats(root: str | Path) -> dict:
             rng = split.similarity_range(s)
             if rng:
                 out.setdefault("category_split", {})[s] = {
-                    "categories": len(split.categories(s)), "similarity_min": rng[0], "similarity_max": rng[1]
+                    "categories": len(split.categories(s)),
+                    "similarity_min": rng[0],
+                    "similarity_max": rng[1],
                 }
         out.setdefault("category_split", {})["train"] = {"categories": len(split.train)}
     return out
 
 
 def format_stats(stats: dict) -> str:
-    lines = ["| split | scenes | episodes | categories | goal instances | mean geodesic (m) | geodesic histogram |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| split | scenes | episodes | categories | goal instances | mean geodesic (m) | geodesic histogram |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for s, st in stats["splits"].items():
         g = st["geodesic_distance"]
         edges = g["histogram_edges_m"]
         hist = " ".join(f"{a}-{b}:{n}" for a, b, n in zip(edges, edges[1:], g["histogram"]))
         mean = "–" if g["mean"] is None else f"{g['mean']:.2f}"
-        lines.append(f"| {s} | {st['scenes']} | {st['episodes']} | {st['categories']} | {st['goal_instances']} "
-                     f"| {mean} | {hist} |")
+        lines.append(
+            f"| {s} | {st['scenes']} | {st['episodes']} | {st['categories']} | {st['goal_instances']} "
+            f"| {mean} | {hist} |"
+        )
     if "category_split" in stats:
         lines += ["", "| category split | categories | similarity range |", "|---|---|---|"]
         for s, v in stats["category_split"].items():

@@ -142,8 +142,12 @@ def warn_skipped(where: str, skipped: Counter, total: int) -> None:
     n = sum(skipped.values())
     if n:
         kinds = ", ".join(f"{c} {k}" for k, c in sorted(skipped.items()))
-        warnings.warn(f"{where}: skipped {n} of {total} episodes that fail validation ({kinds}); "
-                      "`ovon dataset validate` lists them", DatasetWarning, stacklevel=3)
+        warnings.warn(
+            f"{where}: skipped {n} of {total} episodes that fail validation ({kinds}); "
+            "`ovon dataset validate` lists them",
+            DatasetWarning,
+            stacklevel=3,
+        )
 
 
 def split_problem(ds: EpisodeDataset) -> str | None:
@@ -254,15 +258,27 @@ def dataset_splits(root: str | Path) -> list[str]:
     root = Path(root)
     if not root.is_dir():
         raise FileNotFoundError(f"dataset {root} does not exist; fix: pass the folder that holds val_seen/ ...")
-    return [d.name for d in sorted(root.iterdir())
-            if d.is_dir() and not d.name.startswith(".")
-            and (d.name in SPLITS or d.name in ("val_unseen_easy", "val_unseen_hard") or (d / "content").is_dir()
-                 or (d / f"{d.name}.json.gz").is_file())]
+    return [
+        d.name
+        for d in sorted(root.iterdir())
+        if d.is_dir()
+        and not d.name.startswith(".")
+        and (
+            d.name in SPLITS
+            or d.name in ("val_unseen_easy", "val_unseen_hard")
+            or (d / "content").is_dir()
+            or (d / f"{d.name}.json.gz").is_file()
+        )
+    ]
 
 
 def validate_dataset(
-    root: str | Path, scenes: str | Path, splits: list[str] | None = None, cfg: GenerationConfig | None = None,
-    max_episodes_per_scene: int | None = None, tol: float = 0.05,
+    root: str | Path,
+    scenes: str | Path,
+    splits: list[str] | None = None,
+    cfg: GenerationConfig | None = None,
+    max_episodes_per_scene: int | None = None,
+    tol: float = 0.05,
 ) -> ValidationReport:
     cfg = cfg or GenerationConfig()
     root = Path(root)

@@ -45,8 +45,9 @@ def _cpu_seconds(pids: Sequence[int]) -> float:
     return total
 
 
-def measure_throughput(recipe: EnvRecipe, workers: int = 1, envs: int | None = None, steps: int = 400,
-                       warmup: int = 20, seed: int = 0) -> dict[str, float]:
+def measure_throughput(
+    recipe: EnvRecipe, workers: int = 1, envs: int | None = None, steps: int = 400, warmup: int = 20, seed: int = 0
+) -> dict[str, float]:
     """Env steps per second of `envs` copies of `recipe` (default: 4 per worker) on `workers` processes
     (0 = one env stepped directly in this process, no vector env at all). `steps` counts env steps
     over all envs. Returns steps_per_s, seconds, steps, workers, envs, setup_s, cpu_ms_per_step and
@@ -101,7 +102,8 @@ def _result(steps: int, seconds: float, cpu: float, workers: int, envs: int, set
         "envs": envs,
         "setup_s": setup,
         "cpu_ms_per_step": cpu_ms,
-        "cpu_bound_steps_per_s": max(1, min(workers, os.cpu_count() or 1)) * 1000.0 / cpu_ms if cpu_ms > 0
+        "cpu_bound_steps_per_s": max(1, min(workers, os.cpu_count() or 1)) * 1000.0 / cpu_ms
+        if cpu_ms > 0
         else math.nan,
     }
 

@@ -61,8 +61,10 @@ def _config(value: C | Mapping[str, Any] | None, cls: type[C], name: str) -> C:
         msg = re.sub(r"--set ([\w.]+)=VALUE with VALUE", r"set \1 to", str(e))
         msg = msg.replace("fix: --set the values", "fix: set the values")
         raise ConfigError(msg if "fix:" in msg else f"{msg}; fix: use only these keys") from None
-    raise ConfigError(f"{name} = {_shown(value)}: expected a {cls.__name__} or a mapping of its fields; fix: pass "
-                      f"{name}={cls.__name__}(...) or {name}={{...}} with its keys")
+    raise ConfigError(
+        f"{name} = {_shown(value)}: expected a {cls.__name__} or a mapping of its fields; fix: pass "
+        f"{name}={cls.__name__}(...) or {name}={{...}} with its keys"
+    )
 
 
 def _start_pose(start: Any) -> tuple[float, float, float, float] | None:
@@ -70,13 +72,19 @@ def _start_pose(start: Any) -> tuple[float, float, float, float] | None:
     navigable map is checked at reset, once the scene is loaded: `ovon.task.setup.check_start`)."""
     if start is None:
         return None
-    ok = (isinstance(start, Sequence | np.ndarray) and not isinstance(start, str) and len(start) == 4
-          and all(isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool) for v in start)
-          and all(math.isfinite(float(v)) for v in start))
+    ok = (
+        isinstance(start, Sequence | np.ndarray)
+        and not isinstance(start, str)
+        and len(start) == 4
+        and all(isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool) for v in start)
+        and all(math.isfinite(float(v)) for v in start)
+    )
     if not ok:
-        raise ValueError(f"start = {_shown(start)}: expected 4 finite numbers (x, y, z in m, yaw in degrees); "
-                         "fix: pass e.g. start=(3.0, 0.0, 2.0, 90.0) with x, z on the scene's navigable floor, "
-                         "or leave it out for a random start")
+        raise ValueError(
+            f"start = {_shown(start)}: expected 4 finite numbers (x, y, z in m, yaw in degrees); "
+            "fix: pass e.g. start=(3.0, 0.0, 2.0, 90.0) with x, z on the scene's navigable floor, "
+            "or leave it out for a random start"
+        )
     return tuple(float(v) for v in start)  # type: ignore[return-value]
 
 
@@ -115,20 +123,26 @@ class ObjectNavEnv(gym.Env):
         render_mode: str | None = "rgb_array",
     ):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode = {_shown(render_mode)}: expected None or one of "
-                             f"{self.metadata['render_modes']} (ObjectNavEnv.metadata['render_modes']); fix: pass "
-                             "render_mode='rgb_array' and display the frames env.render() returns")
+            raise ValueError(
+                f"render_mode = {_shown(render_mode)}: expected None or one of "
+                f"{self.metadata['render_modes']} (ObjectNavEnv.metadata['render_modes']); fix: pass "
+                "render_mode='rgb_array' and display the frames env.render() returns"
+            )
         sim = _config(sim, SimConfig, "sim")
         task = _config(task, TaskConfig, "task")
         if isinstance(overrides, str) or not isinstance(overrides, Sequence):
-            raise ConfigError(f"overrides = {_shown(overrides)}: expected a list of 'key=value' strings; fix: pass "
-                              "e.g. overrides=['sim.camera.width=160']")
+            raise ConfigError(
+                f"overrides = {_shown(overrides)}: expected a list of 'key=value' strings; fix: pass "
+                "e.g. overrides=['sim.camera.width=160']"
+            )
         if overrides:
             data = parse_overrides(list(overrides))
             unknown = sorted(set(data) - {"sim", "task"})
             if unknown:
-                raise ConfigError(f"overrides = {_shown(list(overrides))}: unknown group(s) {', '.join(unknown)}; "
-                                  "expected keys under sim. or task.; fix: e.g. overrides=['sim.camera.width=160']")
+                raise ConfigError(
+                    f"overrides = {_shown(list(overrides))}: unknown group(s) {', '.join(unknown)}; "
+                    "expected keys under sim. or task.; fix: e.g. overrides=['sim.camera.width=160']"
+                )
             sim = merge(sim, data["sim"], "sim") if "sim" in data else sim
             task = merge(task, data["task"], "task") if "task" in data else task
         start = _start_pose(start)
@@ -233,9 +247,11 @@ class ObjectNavEnv(gym.Env):
                 return int(value)
         last = int(space.start) + int(space.n) - 1
         names = ", ".join(f"{int(space.start) + i}={n}" for i, n in enumerate(ACTION_NAMES))
-        raise ValueError(f"action = {_shown(action)} ({type(action).__name__}): expected an integer in "
-                         f"{space.start}..{last} of action_space {space} ({names}); fix: pass a Python int, a "
-                         "numpy integer or a 0-d integer array, e.g. action_space.sample() or logits.argmax().item()")
+        raise ValueError(
+            f"action = {_shown(action)} ({type(action).__name__}): expected an integer in "
+            f"{space.start}..{last} of action_space {space} ({names}); fix: pass a Python int, a "
+            "numpy integer or a 0-d integer array, e.g. action_space.sample() or logits.argmax().item()"
+        )
 
     def step(self, action):
         action = self._action_id(action)
@@ -245,8 +261,9 @@ class ObjectNavEnv(gym.Env):
         result = self._kin.step(self._state, action, self.np_random)
         self._state = result.state
         self._frame = self._render()
-        self._tracker.update(self._state.position, action == STOP, result.collided, self._frame.semantic,
-                             self._state.yaw)
+        self._tracker.update(
+            self._state.position, action == STOP, result.collided, self._frame.semantic, self._state.yaw
+        )
         odo = self._odometry.update(self._state, self.np_random)
         reward = float(self._tracker.reward())
         terminated = self._tracker.called_stop  # a STOP, unless task.failed_stop_ends is false and it missed
@@ -259,8 +276,10 @@ class ObjectNavEnv(gym.Env):
     def _require_reset(self, method: str) -> None:
         """Gymnasium's order (`ResetNeeded`): no episode state exists before the first reset."""
         if not self._has_episode:
-            raise gym.error.ResetNeeded(f"{method}() without an episode: reset() was not called, or the last one "
-                                        "failed; fix: call reset() (with a valid episode) first")
+            raise gym.error.ResetNeeded(
+                f"{method}() without an episode: reset() was not called, or the last one "
+                "failed; fix: call reset() (with a valid episode) first"
+            )
 
     def render(self):
         self._require_reset("render")
@@ -270,9 +289,16 @@ class ObjectNavEnv(gym.Env):
         """The one channel to ground truth (experts, oracles, failure analysis, recording)."""
         self._require_reset("privileged")
         return Privileged(
-            self._state.copy(), self._grid, self._field, self._viewpoints,
-            self._tracker.goal_ids, self._frame, self._world, float(self._tracker.distance),
-            self.sim_cfg, self.task_cfg,
+            self._state.copy(),
+            self._grid,
+            self._field,
+            self._viewpoints,
+            self._tracker.goal_ids,
+            self._frame,
+            self._world,
+            float(self._tracker.distance),
+            self.sim_cfg,
+            self.task_cfg,
         )
 
     @property
@@ -289,15 +315,21 @@ def _check_options(options: Any) -> None:
     """reset(options=...): None or a dict of known keys; a misspelt key would silently start an ad-hoc
     episode instead of the one given."""
     if not isinstance(options, Mapping):
-        raise ValueError(f"options = {_shown(options)}: expected None or a dict with keys from "
-                         f"{list(RESET_OPTIONS)}; fix: pass options={{'episode': EpisodeSpec(...)}} or leave it out")
+        raise ValueError(
+            f"options = {_shown(options)}: expected None or a dict with keys from "
+            f"{list(RESET_OPTIONS)}; fix: pass options={{'episode': EpisodeSpec(...)}} or leave it out"
+        )
     unknown = sorted(map(str, set(options) - set(RESET_OPTIONS)))
     if unknown:
-        raise ValueError(f"options = {_shown(dict(options))}: unknown key(s) {', '.join(map(repr, unknown))}, expected "
-                         f"keys from {list(RESET_OPTIONS)}; fix: pass options={{'episode': EpisodeSpec(...)}}")
+        raise ValueError(
+            f"options = {_shown(dict(options))}: unknown key(s) {', '.join(map(repr, unknown))}, expected "
+            f"keys from {list(RESET_OPTIONS)}; fix: pass options={{'episode': EpisodeSpec(...)}}"
+        )
     if "episode" in options and not isinstance(options["episode"], EpisodeSpec):
-        raise ValueError(f"options['episode'] = {_shown(options['episode'])}: expected an EpisodeSpec; fix: pass "
-                         "options={'episode': EpisodeSpec(...)} (e.g. one of ovon.dataset.io's episodes)")
+        raise ValueError(
+            f"options['episode'] = {_shown(options['episode'])}: expected an EpisodeSpec; fix: pass "
+            "options={'episode': EpisodeSpec(...)} (e.g. one of ovon.dataset.io's episodes)"
+        )
 
 
 def observation_spaces(sim: SimConfig, task: TaskConfig | None = None) -> dict[str, spaces.Space]:
@@ -317,8 +349,12 @@ def observation_spaces(sim: SimConfig, task: TaskConfig | None = None) -> dict[s
         "collided": spaces.Discrete(2),
     }
     if task is not None and task.kind == "pointnav":
-        obs["pointgoal"] = spaces.Box(np.array([0.0, -1.0, -1.0], np.float32),
-                                      np.array([2 * ODOMETRY_LIMIT_M, 1.0, 1.0], np.float32), (3,), np.float32)
+        obs["pointgoal"] = spaces.Box(
+            np.array([0.0, -1.0, -1.0], np.float32),
+            np.array([2 * ODOMETRY_LIMIT_M, 1.0, 1.0], np.float32),
+            (3,),
+            np.float32,
+        )
     if cam.rgb:
         obs = {"rgb": spaces.Box(0, 255, (cam.height, cam.width, 3), np.uint8), **obs}
     return obs

@@ -43,8 +43,9 @@ class EncodeObservation(gym.Wrapper):
             space.update({k: inner[k] for k in ("rgb", "depth") if k in inner})
         else:
             space[IMAGE] = spaces.Box(-np.inf, np.inf, (int(self.image_encoder.dim),), np.float32)
-        space[GOAL] = inner["pointgoal"] if self.point else spaces.Box(-np.inf, np.inf, (int(self.text.dim),),
-                                                                           np.float32)
+        space[GOAL] = (
+            inner["pointgoal"] if self.point else spaces.Box(-np.inf, np.inf, (int(self.text.dim),), np.float32)
+        )
         space.update({k: inner[k] for k in ("collided", "expert_action") if k in inner})
         self.observation_space = spaces.Dict(space)
 

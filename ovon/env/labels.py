@@ -49,8 +49,7 @@ class ExpertLabels(gym.Wrapper):
         base = env.unwrapped
         self.expert = make_expert(expert, expert_cfg, base.sim_cfg, base.task_cfg)
         self.viewpoint_radius = float(viewpoint_radius)
-        self.observation_space = spaces.Dict({**env.observation_space.spaces,
-                                              KEY: spaces.Discrete(7, start=NO_LABEL)})
+        self.observation_space = spaces.Dict({**env.observation_space.spaces, KEY: spaces.Discrete(7, start=NO_LABEL)})
 
     def reset(self, **kwargs):
         obs, info = self.env.reset(**kwargs)

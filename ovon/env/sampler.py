@@ -29,8 +29,15 @@ class EpisodeSampler(gym.Wrapper):
     """`reset()` starts the next sampled episode (ignoring `options`); episodes whose set-up fails in
     this world (e.g. no reachable goal on the start floor) are skipped and counted in `skipped`."""
 
-    def __init__(self, env: gym.Env, episodes: Sequence[EpisodeSpec], seed: int, scene_repeat: int = 4,
-                 curriculum_start_m: float = 0.0, curriculum_episodes: int = 0) -> None:
+    def __init__(
+        self,
+        env: gym.Env,
+        episodes: Sequence[EpisodeSpec],
+        seed: int,
+        scene_repeat: int = 4,
+        curriculum_start_m: float = 0.0,
+        curriculum_episodes: int = 0,
+    ) -> None:
         super().__init__(env)
         if not episodes:
             raise ValueError("an episode sampler needs at least one episode")
@@ -41,9 +48,11 @@ class EpisodeSampler(gym.Wrapper):
         if self.curriculum:
             missing = [s.episode_id for s in self.episodes if "geodesic_distance" not in (s.info or {})]
             if missing:
-                raise ValueError(f"a start-distance curriculum needs info.geodesic_distance in every episode; "
-                                 f"episode {missing[0]!r} has none (fix: episodes from `ovon dataset generate`, "
-                                 f"or curriculum.start_m=0)")
+                raise ValueError(
+                    f"a start-distance curriculum needs info.geodesic_distance in every episode; "
+                    f"episode {missing[0]!r} has none (fix: episodes from `ovon dataset generate`, "
+                    f"or curriculum.start_m=0)"
+                )
             self.distance = np.array([float(s.info["geodesic_distance"]) for s in self.episodes])
         self.top = float(self.distance.max())  # the cap reaches every episode here
         self.started = 0
@@ -96,9 +105,11 @@ class EpisodeSampler(gym.Wrapper):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         if options:  # silently sampling another episode than the one asked for would be a wrong result
-            raise ValueError(f"reset(options={sorted(options)}): this env samples its own episodes; fix: build "
-                             "the env stack with sample_episodes=False to choose each episode with "
-                             "options={'episode': ...}")
+            raise ValueError(
+                f"reset(options={sorted(options)}): this env samples its own episodes; fix: build "
+                "the env stack with sample_episodes=False to choose each episode with "
+                "options={'episode': ...}"
+            )
         if seed is not None:
             self.rng = np.random.default_rng(seed)
             self.scene, self.remaining = None, 0
@@ -115,15 +126,29 @@ class EpisodeSampler(gym.Wrapper):
         self.actions.append(int(action))
         if terminated or truncated:
             spec = self.current
-            info = {**info, "episode": {"scene": spec.scene, "goal": spec.goal_category,
-                                        "episode_id": spec.episode_id, "split": spec.split}}
+            info = {
+                **info,
+                "episode": {
+                    "scene": spec.scene,
+                    "goal": spec.goal_category,
+                    "episode_id": spec.episode_id,
+                    "split": spec.split,
+                },
+            }
         return obs, reward, terminated, truncated, info
 
     # -- exact resume -------------------------------------------------------------------------
     def get_state(self) -> dict:
-        return {"rng": self.rng.bit_generator.state, "scene": self.scene, "remaining": self.remaining,
-                "spec_index": self.spec_index, "ep_seed": self.ep_seed, "actions": list(self.actions),
-                "skipped": self.skipped, "started": self.started}
+        return {
+            "rng": self.rng.bit_generator.state,
+            "scene": self.scene,
+            "remaining": self.remaining,
+            "spec_index": self.spec_index,
+            "ep_seed": self.ep_seed,
+            "actions": list(self.actions),
+            "skipped": self.skipped,
+            "started": self.started,
+        }
 
     def set_state(self, state: dict):
         """Restore the sampler and replay the current episode; returns the (obs, info) reached."""

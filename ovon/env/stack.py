@@ -67,8 +67,13 @@ def build_env(recipe: EnvRecipe) -> gym.Env:
     """The env stack of `recipe` (see the module docstring for the order)."""
     from ovon.env.core import ObjectNavEnv
 
-    env: gym.Env = ObjectNavEnv(scene=recipe.scene, goal=recipe.goal, episodes=recipe.episodes[:1] if recipe.episodes
-                                else None, sim=recipe.rendering(), task=recipe.task)
+    env: gym.Env = ObjectNavEnv(
+        scene=recipe.scene,
+        goal=recipe.goal,
+        episodes=recipe.episodes[:1] if recipe.episodes else None,
+        sim=recipe.rendering(),
+        task=recipe.task,
+    )
     if recipe.needs_privileged:
         from ovon.env.privileged import PrivilegedInfo
 
@@ -84,8 +89,14 @@ def build_env(recipe: EnvRecipe) -> gym.Env:
     if recipe.episodes and recipe.sample_episodes:
         from ovon.env.sampler import EpisodeSampler
 
-        env = EpisodeSampler(env, recipe.episodes, recipe.seed, recipe.scene_repeat, recipe.curriculum_start_m,
-                             recipe.curriculum_episodes)
+        env = EpisodeSampler(
+            env,
+            recipe.episodes,
+            recipe.seed,
+            recipe.scene_repeat,
+            recipe.curriculum_start_m,
+            recipe.curriculum_episodes,
+        )
     return env
 
 

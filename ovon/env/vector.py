@@ -191,8 +191,7 @@ def _worker(conn, fns: Sequence[EnvFn], first: int) -> None:
                 else:
                     result = host.run(cmd, arg)
             except Exception as e:  # report the env's error to the parent, keep serving
-                conn.send(("error", (str(e).splitlines()[0] if str(e) else type(e).__name__,
-                                     traceback.format_exc())))
+                conn.send(("error", (str(e).splitlines()[0] if str(e) else type(e).__name__, traceback.format_exc())))
                 continue
             conn.send(("ok", result))
     except (KeyboardInterrupt, EOFError, BrokenPipeError):
@@ -218,14 +217,19 @@ class ObjectNavVectorEnv(VectorEnv):
 
     def __init__(self, env_fns: Sequence[EnvFn], workers: int = 0, context: str = "spawn", copy: bool = True):
         if not isinstance(env_fns, Sequence) or not env_fns or not all(callable(f) for f in env_fns):
-            raise ValueError(f"env_fns = {_shown(env_fns)}: expected a non-empty list of functions that make an env; "
-                             "fix: e.g. [functools.partial(build_env, recipe)] * n")
+            raise ValueError(
+                f"env_fns = {_shown(env_fns)}: expected a non-empty list of functions that make an env; "
+                "fix: e.g. [functools.partial(build_env, recipe)] * n"
+            )
         if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 0:
-            raise ValueError(f"workers = {_shown(workers)}: expected an integer >= 0 (0 = every env in this "
-                             "process); fix: e.g. workers=0, or workers=2 for two worker processes")
+            raise ValueError(
+                f"workers = {_shown(workers)}: expected an integer >= 0 (0 = every env in this "
+                "process); fix: e.g. workers=0, or workers=2 for two worker processes"
+            )
         if context not in mp.get_all_start_methods():
-            raise ValueError(f"context = {_shown(context)}: expected one of {mp.get_all_start_methods()}; fix: "
-                             "leave it out (spawn)")
+            raise ValueError(
+                f"context = {_shown(context)}: expected one of {mp.get_all_start_methods()}; fix: leave it out (spawn)"
+            )
         self.num_envs = len(env_fns)
         self.copy = copy
         workers = min(int(workers), self.num_envs)  # more workers than envs would idle
@@ -248,8 +252,9 @@ class ObjectNavVectorEnv(VectorEnv):
             self.observation_space = batch_space(single_obs, self.num_envs)
             self.action_space = batch_space(single_act, self.num_envs)
             self._arrays = _array_keys(single_obs)
-            self._texts = {k: [""] * self.num_envs for k, sp in single_obs.spaces.items()
-                           if isinstance(sp, spaces.Text)}
+            self._texts = {
+                k: [""] * self.num_envs for k, sp in single_obs.spaces.items() if isinstance(sp, spaces.Text)
+            }
             specs = {}
             for k, (shape, dtype) in self._arrays.items():
                 full = (self.num_envs, *shape)
@@ -319,8 +324,10 @@ class ObjectNavVectorEnv(VectorEnv):
                 messages = [ForkingPickler.dumps((cmd, block_args(b))) for b in self._blocks]
             except Exception as e:  # noqa: BLE001 - any pickling error
                 why = f"{type(e).__name__}: {str(e).splitlines()[0]}" if str(e) else type(e).__name__
-                raise ValueError(f"{cmd}: its arguments cannot be sent to the env worker processes ({why}); fix: "
-                                 "pass picklable values, or workers=0") from None
+                raise ValueError(
+                    f"{cmd}: its arguments cannot be sent to the env worker processes ({why}); fix: "
+                    "pass picklable values, or workers=0"
+                ) from None
             results, error, done = [], None, False
             try:
                 for conn, msg in zip(self._conns, messages):
@@ -377,11 +384,18 @@ class ObjectNavVectorEnv(VectorEnv):
             return [None] * n
         if _seed_int(seed):
             return [int(seed) + i for i in range(n)]
-        if (isinstance(seed, Sequence | np.ndarray) and not isinstance(seed, str | bytes) and np.ndim(seed) == 1
-                and len(seed) == n and all(s is None or _seed_int(s) for s in seed)):
+        if (
+            isinstance(seed, Sequence | np.ndarray)
+            and not isinstance(seed, str | bytes)
+            and np.ndim(seed) == 1
+            and len(seed) == n
+            and all(s is None or _seed_int(s) for s in seed)
+        ):
             return [None if s is None else int(s) for s in seed]
-        raise ValueError(f"seed = {_shown(seed)}: expected None, an integer >= 0 (env i gets seed + i) or a sequence "
-                         f"of {n} integers >= 0 or None (one per env); fix: e.g. seed=0 or seed=list(range({n}))")
+        raise ValueError(
+            f"seed = {_shown(seed)}: expected None, an integer >= 0 (env i gets seed + i) or a sequence "
+            f"of {n} integers >= 0 or None (one per env); fix: e.g. seed=0 or seed=list(range({n}))"
+        )
 
     def _actions(self, actions: Any) -> list:
         """One valid action per env (a Discrete space: ints of the space, floats and bools refused as by
@@ -401,8 +415,10 @@ class ObjectNavVectorEnv(VectorEnv):
                 return list(arr)
             expected = f"an array of {n} actions (one per env) in action_space {self.action_space}"
         got = f"shape {arr.shape}, dtype {arr.dtype}" if arr.dtype != object else type(actions).__name__
-        raise ValueError(f"actions = {_shown(actions)} ({got}): expected {expected}; fix: pass e.g. "
-                         "vec.action_space.sample() or a policy's actions as a CPU integer array")
+        raise ValueError(
+            f"actions = {_shown(actions)} ({got}): expected {expected}; fix: pass e.g. "
+            "vec.action_space.sample() or a policy's actions as a CPU integer array"
+        )
 
     # -- Gymnasium API ------------------------------------------------------------------------------
     def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict | None = None):
@@ -411,8 +427,10 @@ class ObjectNavVectorEnv(VectorEnv):
         self._check_usable()
         seeds = self._seeds(seed)
         if options is not None and not isinstance(options, Mapping):
-            raise ValueError(f"options = {_shown(options)}: expected None or a dict (given to every env's reset); "
-                             "fix: e.g. options={'episode': EpisodeSpec(...)} or leave it out")
+            raise ValueError(
+                f"options = {_shown(options)}: expected None or a dict (given to every env's reset); "
+                "fix: e.g. options={'episode': EpisodeSpec(...)} or leave it out"
+            )
         results = self._run("reset", lambda b: ([seeds[i] for i in b], options), texts_at=1)
         return self._obs(), self._infos([i for r in results for i in r[0]])
 
@@ -433,11 +451,17 @@ class ObjectNavVectorEnv(VectorEnv):
     def call_each(self, name: str, args: Sequence[tuple]) -> tuple:
         """`getattr(env, name)(*args[i])` on env i; results in env order."""
         self._check_usable()
-        if (not isinstance(name, str) or not isinstance(args, Sequence) or len(args) != self.num_envs
-                or not all(isinstance(a, tuple | list) for a in args)):
-            raise ValueError(f"call_each({_shown(name)}, {_shown(args)}): expected a method name and "
-                             f"{self.num_envs} argument tuples (one per env); fix: e.g. call_each('set_state', "
-                             f"[(s,) for s in states])")
+        if (
+            not isinstance(name, str)
+            or not isinstance(args, Sequence)
+            or len(args) != self.num_envs
+            or not all(isinstance(a, tuple | list) for a in args)
+        ):
+            raise ValueError(
+                f"call_each({_shown(name)}, {_shown(args)}): expected a method name and "
+                f"{self.num_envs} argument tuples (one per env); fix: e.g. call_each('set_state', "
+                f"[(s,) for s in states])"
+            )
         args = [tuple(a) for a in args]
         return tuple(x for r in self._run("call", lambda b: (name, [args[i] for i in b]), None) for x in r)
 
@@ -446,8 +470,10 @@ class ObjectNavVectorEnv(VectorEnv):
         self._check_usable()
         if not isinstance(states, Sequence) or len(states) != self.num_envs:
             got = f"{len(states)} env states" if isinstance(states, Sequence) else _shown(states)
-            raise ValueError(f"states = {got}: expected {self.num_envs} env states (one per env, as get_state() "
-                             f"returns them); fix: restore states saved from a vector env of {self.num_envs} envs")
+            raise ValueError(
+                f"states = {got}: expected {self.num_envs} env states (one per env, as get_state() "
+                f"returns them); fix: restore states saved from a vector env of {self.num_envs} envs"
+            )
         args = [(s,) for s in states]
         results = self._run("call_obs", lambda b: ("set_state", [args[i] for i in b]), texts_at=1)
         return self._obs(), self._infos([i for r in results for i in r[0]])

@@ -55,8 +55,22 @@ SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _
 HOUSE_SEEDS = Pattern(r" *([0-9]+(-[0-9]+)? *(, *[0-9]+(-[0-9]+)? *)*)?", "house seeds like 80000-80003 or 0,5-7")
 # Settings that may differ between the sessions of one run folder: they change what is run or how fast,
 # never the result of an episode (paths are compared through their normalised identities instead).
-MAY_CHANGE = ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "chunk", "name",
-              "agent_kwargs.checkpoint", "remote.timeout_s", "remote.batch", "remote.allow_privileged", "strict")
+MAY_CHANGE = (
+    "data",
+    "scenes",
+    "splits",
+    "seeds",
+    "episodes",
+    "workers",
+    "executor",
+    "chunk",
+    "name",
+    "agent_kwargs.checkpoint",
+    "remote.timeout_s",
+    "remote.batch",
+    "remote.allow_privileged",
+    "strict",
+)
 
 
 @dataclass
@@ -79,9 +93,13 @@ class EvalConfig:
     name: str | None = constrained(None, ROW_NAME, flag="--name")
     remote: RemoteConfig = field(default_factory=RemoteConfig)  # --agent remote:HOST:PORT only
     strict: bool = False  # refuse a split holding an invalid episode instead of skipping it (counted)
-    rules: ClassVar = (rule(("task.failed_stop_ends",), bool,
-                            "task.failed_stop_ends true (false is a training-only setting: every STOP ends an "
-                            "evaluated episode)"),)
+    rules: ClassVar = (
+        rule(
+            ("task.failed_stop_ends",),
+            bool,
+            "task.failed_stop_ends true (false is a training-only setting: every STOP ends an evaluated episode)",
+        ),
+    )
 
 
 def with_camera(cfg: EvalConfig, camera: dict) -> EvalConfig:
@@ -114,14 +132,16 @@ def parse_noise(spec: str | None) -> NoiseConfig:
     for item in [s.strip() for s in spec.split(",") if s.strip()]:
         name, _, arg = item.partition(":")
         if name in seen:  # the last one would silently win
-            raise ConfigError(f"--noise {spec!r}: {name} noise given twice ({seen[name]!r} and {item!r}); fix: keep "
-                              "one of them")
+            raise ConfigError(
+                f"--noise {spec!r}: {name} noise given twice ({seen[name]!r} and {item!r}); fix: keep one of them"
+            )
         seen[name] = item
         if name == "actuation":
             model, _, mult = (arg or "ilqr").partition("*")
             if model not in models:
-                raise ConfigError(f"--noise {item!r}: unknown actuation model {model!r}, expected one of "
-                                  f"{', '.join(models)}; {fix}")
+                raise ConfigError(
+                    f"--noise {item!r}: unknown actuation model {model!r}, expected one of {', '.join(models)}; {fix}"
+                )
             try:
                 k = float(mult or 1.0)
             except ValueError:
@@ -132,8 +152,10 @@ def parse_noise(spec: str | None) -> NoiseConfig:
         elif name == "odometry" and arg in ("",) + odo_modes:
             cfg = dataclasses.replace(cfg, odometry=True, odometry_mode=arg or "bounded")
         else:
-            raise ConfigError(f"--noise: unknown noise {item!r}, expected actuation[:ilqr|proportional|movebase|"
-                              f"gaussian][*k] or odometry[:bounded|drift]; {fix}")
+            raise ConfigError(
+                f"--noise: unknown noise {item!r}, expected actuation[:ilqr|proportional|movebase|"
+                f"gaussian][*k] or odometry[:bounded|drift]; {fix}"
+            )
     return validate(cfg, "sim.noise")
 
 
@@ -143,8 +165,10 @@ def apply_overrides(cfg: EvalConfig, overrides: list[str]) -> EvalConfig:
     data = parse_overrides(overrides)
     groups = {g: merge(getattr(cfg, g), data.pop(g), g) for g in ("sim", "task", "remote") if g in data}
     if data:
-        raise ConfigError(f"unknown override group(s) {sorted(data)}; fix: --set takes sim.*, task.* or remote.* keys "
-                          "here (e.g. --set task.max_steps=300); the other settings have their own options")
+        raise ConfigError(
+            f"unknown override group(s) {sorted(data)}; fix: --set takes sim.*, task.* or remote.* keys "
+            "here (e.g. --set task.max_steps=300); the other settings have their own options"
+        )
     return dataclasses.replace(cfg, **groups)
 
 
@@ -160,8 +184,10 @@ class SplitEpisodes:
 
 
 def strict_fix(data: str, scenes: str) -> str:
-    return (f"fix: correct or remove the episode (`ovon dataset validate {data} --scenes {scenes}` lists every "
-            "problem), or leave out --strict to skip invalid episodes with a counted warning")
+    return (
+        f"fix: correct or remove the episode (`ovon dataset validate {data} --scenes {scenes}` lists every "
+        "problem), or leave out --strict to skip invalid episodes with a counted warning"
+    )
 
 
 def load_split(data: str, scenes: str, split: str, limit: int | None, strict: bool = False) -> SplitEpisodes:
@@ -178,8 +204,10 @@ def load_split(data: str, scenes: str, split: str, limit: int | None, strict: bo
     ds = EpisodeDataset(data, split)
     why = split_problem(ds)
     if why:
-        raise DatasetError(f"split {split!r}: {why}; fix: pass a dataset written by `ovon dataset generate` or "
-                           "the released HM3D-OVON files")
+        raise DatasetError(
+            f"split {split!r}: {why}; fix: pass a dataset written by `ovon dataset generate` or "
+            "the released HM3D-OVON files"
+        )
     per_scene: list[list[tuple]] = []  # (shard path, index, episode, problems, goals, scene path)
     for scene in ds.scenes():
         shard = ds.load_scene(scene)
@@ -192,16 +220,22 @@ def load_split(data: str, scenes: str, split: str, limit: int | None, strict: bo
                 except DatasetError as e:
                     raise DatasetError(f"{where}: episode {ep.episode_id!r}: {e}") from None
         chk = check_shard(shard)
-        per_scene.append([(where, i, ep, chk.episodes.get(i), shard.goals_by_category, paths[ep.scene_id])
-                          for i, ep in enumerate(shard.episodes)])
+        per_scene.append(
+            [
+                (where, i, ep, chk.episodes.get(i), shard.goals_by_category, paths[ep.scene_id])
+                for i, ep in enumerate(shard.episodes)
+            ]
+        )
     order = [p[i] for i in range(max(map(len, per_scene), default=0)) for p in per_scene if i < len(p)]
     picked = order if limit is None else order[:limit]
     out = SplitEpisodes([], [], len(picked))
     for where, i, ep, problems, goals, path in picked:
         if problems:
             if strict:
-                raise DatasetError(f"{where}: episode {str(ep.episode_id)!r} (episodes[{i}]): {problems[0][1]}; "
-                                   f"{strict_fix(data, scenes)}")
+                raise DatasetError(
+                    f"{where}: episode {str(ep.episode_id)!r} (episodes[{i}]): {problems[0][1]}; "
+                    f"{strict_fix(data, scenes)}"
+                )
             out.skipped[problems[0][0]] += 1
             continue
         out.specs.append(spec_from_episode(ep, goals_for(ep, goals), path, split))
@@ -219,8 +253,15 @@ def load_specs(data: str, scenes: str, split: str, limit: int | None) -> list[Ep
     return sel.specs
 
 
-def drop_off_map_starts(sel: SplitEpisodes, sim: SimConfig, workers: int = 1, executor: str = "process",
-                        strict: bool = False, data: str = "", scenes: str = "") -> SplitEpisodes:
+def drop_off_map_starts(
+    sel: SplitEpisodes,
+    sim: SimConfig,
+    workers: int = 1,
+    executor: str = "process",
+    strict: bool = False,
+    data: str = "",
+    scenes: str = "",
+) -> SplitEpisodes:
     """`sel` without the episodes whose start is off the navigable map of their scene (for this agent's
     radius and the nav grid of `sim`), counted as `start_off_map` (refused with `strict`). One job per
     scene."""
@@ -232,8 +273,15 @@ def drop_off_map_starts(sel: SplitEpisodes, sim: SimConfig, workers: int = 1, ex
     for i, s in enumerate(specs):
         if s.start_position is not None:
             by_scene.setdefault(s.scene, []).append(i)
-    jobs = [{"scene": sc, "starts": [[float(x) for x in specs[i].start_position] for i in idx],
-             "agent": to_dict(sim.agent), "nav": to_dict(sim.nav)} for sc, idx in sorted(by_scene.items())]
+    jobs = [
+        {
+            "scene": sc,
+            "starts": [[float(x) for x in specs[i].start_position] for i in idx],
+            "agent": to_dict(sim.agent),
+            "nav": to_dict(sim.nav),
+        }
+        for sc, idx in sorted(by_scene.items())
+    ]
     bad: dict[int, str] = {}
     # A pool costs seconds to start: worth it only when there are many scenes to load.
     many = len(jobs) > 4
@@ -243,8 +291,10 @@ def drop_off_map_starts(sel: SplitEpisodes, sim: SimConfig, workers: int = 1, ex
     if bad and strict:
         i = min(bad)
         s = specs[i]
-        raise DatasetError(f"{sel.shards[i]}: episode {s.episode_id!r}: {bad[i]} of {s.scene} (agent radius "
-                           f"{sim.agent.radius} m); {strict_fix(data, scenes)}")
+        raise DatasetError(
+            f"{sel.shards[i]}: episode {s.episode_id!r}: {bad[i]} of {s.scene} (agent radius "
+            f"{sim.agent.radius} m); {strict_fix(data, scenes)}"
+        )
     keep = [i for i in range(len(specs)) if i not in bad]
     skipped = sel.skipped + Counter({"start_off_map": len(bad)})
     return SplitEpisodes([specs[i] for i in keep], [sel.shards[i] for i in keep], sel.picked, skipped)
@@ -299,8 +349,13 @@ def run_unit(unit: dict) -> list[dict]:
         for env in _CACHE.pop("envs", []):
             env.close()
         _CACHE["env_key"] = key
-    recipe = EnvRecipe(sim=sim, task=from_dict(TaskConfig, unit["task"]), episodes=unit["specs"][:1],
-                       sample_episodes=False, privileged=privileged)
+    recipe = EnvRecipe(
+        sim=sim,
+        task=from_dict(TaskConfig, unit["task"]),
+        episodes=unit["specs"][:1],
+        sample_episodes=False,
+        privileged=privileged,
+    )
     envs = _CACHE.setdefault("envs", [])
     while len(envs) < min(n_envs, len(unit["specs"])):
         envs.append(build_env(recipe))
@@ -345,8 +400,10 @@ def run_inputs(cfg: EvalConfig) -> dict:
     from ovon.runfolder import file_sha256, path_identity
 
     inputs: dict = {
-        "data": {"path": path_identity(cfg.data),
-                 "splits": {s: EpisodeDataset(cfg.data, s).fingerprint() for s in cfg.splits}},
+        "data": {
+            "path": path_identity(cfg.data),
+            "splits": {s: EpisodeDataset(cfg.data, s).fingerprint() for s in cfg.splits},
+        },
         "scenes": {"path": path_identity(cfg.scenes)},
     }
     ckpt = cfg.agent_kwargs.get("checkpoint")
@@ -379,12 +436,13 @@ def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> tuple[dict[st
     out = {}
     for split in cfg.splits:
         sel = load_split(cfg.data, cfg.scenes, split, cfg.episodes, cfg.strict)
-        sel = drop_off_map_starts(sel, cfg.sim, workers or cfg.workers, cfg.executor, cfg.strict, cfg.data,
-                                  cfg.scenes)
+        sel = drop_off_map_starts(sel, cfg.sim, workers or cfg.workers, cfg.executor, cfg.strict, cfg.data, cfg.scenes)
         warn_skipped(f"{Path(cfg.data) / split}", sel.skipped, sel.picked)
         if not sel.specs:
-            raise DatasetError(f"split {split!r} in {cfg.data} has no usable episodes; fix: run `ovon dataset "
-                               f"validate {cfg.data} --scenes {cfg.scenes}` to see why")
+            raise DatasetError(
+                f"split {split!r} in {cfg.data} has no usable episodes; fix: run `ovon dataset "
+                f"validate {cfg.data} --scenes {cfg.scenes}` to see why"
+            )
         out[split] = sel
     return out, name
 
@@ -396,9 +454,10 @@ def prepare(cfg: EvalConfig, workers: int | None = None) -> dict[str, list[Episo
 
 def skip_counts(selected: dict[str, SplitEpisodes]) -> dict[str, dict]:
     """Per split: episodes picked, and those skipped before the run by problem (for `finalize`)."""
-    return {split: {"picked": sel.picked, "count": sum(sel.skipped.values()),
-                    "reasons": dict(sorted(sel.skipped.items()))} for split, sel in selected.items()}
-
+    return {
+        split: {"picked": sel.picked, "count": sum(sel.skipped.values()), "reasons": dict(sorted(sel.skipped.items()))}
+        for split, sel in selected.items()
+    }
 
 
 def check_source(cfg: EvalConfig) -> None:
@@ -413,12 +472,16 @@ def check_source(cfg: EvalConfig) -> None:
             raise ConfigError("--task pointnav needs --procedural SEEDS (held-out houses, e.g. 80000-80003)")
         return
     if cfg.procedural:
-        raise ConfigError(f"--procedural = {cfg.procedural!r}: house seeds are for --task pointnav; fix: drop "
-                          "--procedural, or pass --task pointnav (Python: task.kind='pointnav')")
+        raise ConfigError(
+            f"--procedural = {cfg.procedural!r}: house seeds are for --task pointnav; fix: drop "
+            "--procedural, or pass --task pointnav (Python: task.kind='pointnav')"
+        )
     for flag, value in (("--data", cfg.data), ("--scenes", cfg.scenes)):
         if not value:
-            raise ConfigError(f"{flag} = '': expected an existing folder; fix: pass {flag} (objectnav evaluates "
-                              "the episodes of a dataset; --task pointnav samples them in --procedural houses)")
+            raise ConfigError(
+                f"{flag} = '': expected an existing folder; fix: pass {flag} (objectnav evaluates "
+                "the episodes of a dataset; --task pointnav samples them in --procedural houses)"
+            )
 
 
 def plan(cfg: EvalConfig, workers: int | None = None) -> RunPlan:
@@ -431,8 +494,14 @@ def plan(cfg: EvalConfig, workers: int | None = None) -> RunPlan:
         return pointnav_plan(cfg)
     selected, name = prepare_splits(cfg, workers)
     config = {k: v for k, v in to_dict(cfg).items() if k != "procedural"}  # identity as before pointnav joined
-    return RunPlan({split: sel.specs for split, sel in selected.items()}, name, config, run_inputs(cfg),
-                   skip_counts(selected), f"evaluate {name}")
+    return RunPlan(
+        {split: sel.specs for split, sel in selected.items()},
+        name,
+        config,
+        run_inputs(cfg),
+        skip_counts(selected),
+        f"evaluate {name}",
+    )
 
 
 def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
@@ -461,8 +530,12 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
             writer.close()
             if is_remote(cfg.agent):
                 release_agent()  # in-process runs: the connection closes with the run
-        wanted = {(split, int(seed), s.scene, s.episode_id)
-                  for seed in cfg.seeds for split, specs in p.specs.items() for s in specs}
+        wanted = {
+            (split, int(seed), s.scene, s.episode_id)
+            for seed in cfg.seeds
+            for split, specs in p.specs.items()
+            for s in specs
+        }
         return finalize(run_dir, p.name, wanted, p.skipped)
 
 

@@ -20,4 +20,3 @@ class RunPlan:
     inputs: dict
     skipped: dict | None
     label: str  # progress bar title
-

@@ -129,8 +129,12 @@ def read_records(run_dir: str | Path, repair: bool = False) -> list[dict]:
     if rf.rejected:
         where = ", ".join(str(r["line"]) for r in rf.rejected[:10]) + (" ..." if len(rf.rejected) > 10 else "")
         action = f"moved to {REJECTED_FILE}" if repair else "skipped"
-        warnings.warn(f"{path}: {len(rf.rejected)} line(s) that are not complete records {action} "
-                      f"(line {where}); {len(rf.records)} complete records kept", RecordWarning, stacklevel=2)
+        warnings.warn(
+            f"{path}: {len(rf.rejected)} line(s) that are not complete records {action} "
+            f"(line {where}); {len(rf.records)} complete records kept",
+            RecordWarning,
+            stacklevel=2,
+        )
         if repair:
             side = Path(run_dir) / REJECTED_FILE
             with open(side, "ab") as f:
@@ -247,8 +251,10 @@ def coverage_lines(splits: dict[str, dict]) -> list[str]:
         if sk.get("count"):
             reasons = ", ".join(f"{n} {k}" for k, n in sk.get("reasons", {}).items())
             per_seed = " per seed" if len(splits[split].get("seeds", {})) > 1 else ""
-            out.append(f"{split}: {sk['picked'] - sk['count']} of {sk['picked']} episodes{per_seed} ({sk['count']} "
-                       f"skipped before the run: {reasons}; `ovon dataset validate` lists them)")
+            out.append(
+                f"{split}: {sk['picked'] - sk['count']} of {sk['picked']} episodes{per_seed} ({sk['count']} "
+                f"skipped before the run: {reasons}; `ovon dataset validate` lists them)"
+            )
     return out
 
 

@@ -249,8 +249,9 @@ def _named(cls: type, data: Any, where: str) -> dict[str, Any]:
 
 def _read(path: Path) -> dict:
     if path.is_dir():  # not "does not exist": it does, as a folder
-        raise DefinitionError(f"{path} is a folder, not a YAML file; fix: pass the path of a .yaml file, e.g. "
-                              f"{path / 'NAME.yaml'}")
+        raise DefinitionError(
+            f"{path} is a folder, not a YAML file; fix: pass the path of a .yaml file, e.g. {path / 'NAME.yaml'}"
+        )
     try:
         return load_yaml(path)
     except ConfigError as e:
@@ -271,17 +272,22 @@ def load_catalogue(defs_dir: Path = DEFS_DIR) -> Catalogue:
     cells_raw = _read(defs_dir / "cells.yaml")
     unknown = set(cells_raw) - {"anchors", "train", "evaluate"}
     if unknown:
-        raise DefinitionError(f"cells.yaml: unknown top-level key(s) {sorted(unknown)}; valid: anchors, train, "
-                              "evaluate")
+        raise DefinitionError(
+            f"cells.yaml: unknown top-level key(s) {sorted(unknown)}; valid: anchors, train, evaluate"
+        )
     train, evaluate = _cells(cells_raw, "cells.yaml")
     return Catalogue(scales, recipes, train, evaluate)
 
 
 def _cells(raw: dict, where: str) -> tuple[dict[str, TrainCell], dict[str, EvalCell]]:
-    train = {n: dataclasses.replace(c, scales=_per_scale(CellScale, c.scales, f"{where}:train.{n}"))
-             for n, c in _named(TrainCell, raw.get("train"), f"{where}:train").items()}
-    evaluate = {n: dataclasses.replace(c, scales=_per_scale(CellScale, c.scales, f"{where}:evaluate.{n}"))
-                for n, c in _named(EvalCell, raw.get("evaluate"), f"{where}:evaluate").items()}
+    train = {
+        n: dataclasses.replace(c, scales=_per_scale(CellScale, c.scales, f"{where}:train.{n}"))
+        for n, c in _named(TrainCell, raw.get("train"), f"{where}:train").items()
+    }
+    evaluate = {
+        n: dataclasses.replace(c, scales=_per_scale(CellScale, c.scales, f"{where}:evaluate.{n}"))
+        for n, c in _named(EvalCell, raw.get("evaluate"), f"{where}:evaluate").items()
+    }
     return train, evaluate
 
 
@@ -296,8 +302,10 @@ def load_experiment(name_or_path: str, defs_dir: Path = DEFS_DIR) -> Experiment:
     if path.suffix not in (".yaml", ".yml"):
         path = defs_dir / f"{name_or_path}.yaml"
         if name_or_path in [p.removesuffix(".yaml") for p in CATALOGUE_FILES] or not path.is_file():
-            raise DefinitionError(f"unknown experiment {name_or_path!r}; valid: {', '.join(experiment_names(defs_dir))}"
-                                  " or the path of an experiment .yaml file")
+            raise DefinitionError(
+                f"unknown experiment {name_or_path!r}; valid: {', '.join(experiment_names(defs_dir))}"
+                " or the path of an experiment .yaml file"
+            )
     raw = _read(path)
     where = str(path if path.parent != defs_dir else path.name)
     exp = _typed(Experiment, {k: v for k, v in raw.items() if k not in ("train", "evaluate", "anchors")}, where)
@@ -312,14 +320,16 @@ def merged_catalogue(experiments: list[Experiment], base: Catalogue) -> Catalogu
         for kind, own, into in (("train", exp.train, train), ("evaluate", exp.evaluate, evaluate)):
             for name, cell in own.items():
                 if name in into and into[name] != cell:
-                    raise DefinitionError(f"{exp.source}: {kind} cell {name!r} is already defined differently "
-                                          f"(cells.yaml or another experiment); fix: give it another name")
+                    raise DefinitionError(
+                        f"{exp.source}: {kind} cell {name!r} is already defined differently "
+                        f"(cells.yaml or another experiment); fix: give it another name"
+                    )
                 into[name] = cell
     return dataclasses.replace(base, train=train, evaluate=evaluate)
 
 
 def parse_ref(ref: str, where: str) -> tuple[str, str]:
-    """"ROW @ COLUMN" -> (row, column)."""
+    """ "ROW @ COLUMN" -> (row, column)."""
     row, sep, col = ref.partition("@")
     if not sep or not row.strip() or not col.strip():
         raise DefinitionError(f"{where}: reference {ref!r} is not 'ROW @ COLUMN' (e.g. 'DAgRL @ val_seen')")
@@ -332,8 +342,9 @@ def paper_numbers(row: Row, column: str, where: str) -> dict[str, float | None] 
     if value is None:
         return None
     if not isinstance(value, list | tuple) or len(value) != 4:
-        raise DefinitionError(f"{where}: paper.{column} = {value!r} is not [SR, SR std, SPL, SPL std] (std may be "
-                              "null)")
+        raise DefinitionError(
+            f"{where}: paper.{column} = {value!r} is not [SR, SR std, SPL, SPL std] (std may be null)"
+        )
     try:
         sr, sr_std, spl, spl_std = (None if v is None else float(v) for v in value)
     except (TypeError, ValueError):

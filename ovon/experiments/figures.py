@@ -32,13 +32,26 @@ def table_figure(title: str, table: dict, out: Path) -> Path:
         xs_ours = [i + (2 * j - n + 0.5) * width for i in range(len(rows))]
         ours = [r["cells"][col]["ours"] for r in rows]
         paper = [r["cells"][col]["paper"] for r in rows]
-        ax.bar(xs_ours, [o["sr"][0] if o else 0 for o in ours], width, yerr=[o["sr"][1] if o else 0 for o in ours],
-               color=colors[j % len(colors)], label=f"{col} (ours)")
+        ax.bar(
+            xs_ours,
+            [o["sr"][0] if o else 0 for o in ours],
+            width,
+            yerr=[o["sr"][1] if o else 0 for o in ours],
+            color=colors[j % len(colors)],
+            label=f"{col} (ours)",
+        )
         for x, o in zip(xs_ours, ours):
             if o is None:
                 ax.text(x, 0.5, "not run", rotation=90, ha="center", va="bottom", fontsize=7)
-        ax.bar([x + width for x in xs_ours], [p["sr"] if p else 0 for p in paper], width, fill=False, hatch="//",
-               edgecolor=colors[j % len(colors)], label=f"{col} (paper)")
+        ax.bar(
+            [x + width for x in xs_ours],
+            [p["sr"] if p else 0 for p in paper],
+            width,
+            fill=False,
+            hatch="//",
+            edgecolor=colors[j % len(colors)],
+            label=f"{col} (paper)",
+        )
     ax.set_xticks(range(len(rows)), [r["name"] for r in rows])
     ax.set_ylabel("SR (%)")
     ax.set_title(title, fontsize=10)
@@ -57,8 +70,15 @@ def failure_figure(fig_data: dict, out: Path) -> Path:
     for j, split in enumerate(splits):
         xs = [i + (j - (n - 1) / 2) * width for i in range(len(groups))]
         vals = [g["ours"].get(split, 0.0) if g["ours"] else 0.0 for g in groups]
-        ax.bar(xs, vals, width, color=[g["color"] for g in groups], alpha=0.45 + 0.55 * (j + 1) / n,
-               edgecolor="black", linewidth=0.5)
+        ax.bar(
+            xs,
+            vals,
+            width,
+            color=[g["color"] for g in groups],
+            alpha=0.45 + 0.55 * (j + 1) / n,
+            edgecolor="black",
+            linewidth=0.5,
+        )
         for x, g in zip(xs, groups):
             if g["paper"]:
                 ax.plot([x], [g["paper"][split]], marker="D", color="black", markersize=4)
@@ -67,13 +87,16 @@ def failure_figure(fig_data: dict, out: Path) -> Path:
             ax.fill_between([i - 0.4, i + 0.4], *g["paper_range"], color="grey", alpha=0.2, linewidth=0)
     from matplotlib.patches import Patch
 
-    handles = [Patch(facecolor="grey", alpha=0.45 + 0.55 * (j + 1) / n, edgecolor="black", label=s)
-               for j, s in enumerate(splits)]
+    handles = [
+        Patch(facecolor="grey", alpha=0.45 + 0.55 * (j + 1) / n, edgecolor="black", label=s)
+        for j, s in enumerate(splits)
+    ]
     ax.set_xticks(range(len(groups)), [g["name"] for g in groups], rotation=20, fontsize=8)
     ax.set_ylabel("% of episodes")
     status = "" if fig_data["groups"] and fig_data["groups"][0]["ours"] else " (not run)"
-    ax.set_title(f"{fig_data['caption']}{status}\nbars: ours per split (light to dark); diamonds / grey band: paper",
-                 fontsize=9)
+    ax.set_title(
+        f"{fig_data['caption']}{status}\nbars: ours per split (light to dark); diamonds / grey band: paper", fontsize=9
+    )
     ax.legend(handles=handles, fontsize=7)
     return _save(fig, out)
 
@@ -97,7 +120,7 @@ def training_curve(name: str, folder: Path, out: Path) -> Path | None:
         ys = [r[key] for r in rows if key in r]
         ax.plot(xs, ys, lw=0.6, alpha=0.4, color="C0")
         k = max(1, len(ys) // 20)
-        smooth = [sum(ys[max(0, i - k + 1): i + 1]) / len(ys[max(0, i - k + 1): i + 1]) for i in range(len(ys))]
+        smooth = [sum(ys[max(0, i - k + 1) : i + 1]) / len(ys[max(0, i - k + 1) : i + 1]) for i in range(len(ys))]
         ax.plot(xs, smooth, lw=1.4, color="C0")
         ax.set_title(key, fontsize=9)
         ax.set_xlabel("env steps", fontsize=8)

@@ -14,8 +14,10 @@ from ovon.experiments.definitions import Check, Finding
 Value = tuple[float, float]  # (mean, std) in %
 Lookup = Callable[[str, str], Value | None]  # (ref, metric) -> value, None when not run
 
-RULE_NOTE = ("means over evaluation seeds, in % points; 'within noise' where a deciding gap is smaller than the sum "
-             "of the two standard deviations")
+RULE_NOTE = (
+    "means over evaluation seeds, in % points; 'within noise' where a deciding gap is smaller than the sum "
+    "of the two standard deviations"
+)
 
 
 def rule_text(chk: Check) -> str:
@@ -95,6 +97,7 @@ def judge(finding: Finding, look: Lookup) -> dict:
     checks = [{"rule": rule_text(c), **judge_check(c, look)} for c in finding.checks]
     verdicts = {c["verdict"] for c in checks}
     verdict = "not run" if "not run" in verdicts else ("does not hold" if "does not hold" in verdicts else "holds")
-    noisy = verdict != "not run" and _deciding(verdict == "holds", [c["verdict"] == "holds" for c in checks],
-                                                [c["within_noise"] for c in checks])
+    noisy = verdict != "not run" and _deciding(
+        verdict == "holds", [c["verdict"] == "holds" for c in checks], [c["within_noise"] for c in checks]
+    )
     return {"verdict": verdict, "within_noise": noisy, "checks": checks}

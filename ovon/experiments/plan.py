@@ -108,8 +108,13 @@ def set_args(values: dict, flag: str = "--set") -> list[str]:
 
 
 # ----- resolution ------------------------------------------------------------------------------------
-def resolve(experiments: list[Experiment], scale: str, root: str | Path, overrides: list[str] | tuple = (),
-            catalogue: Catalogue | None = None) -> Plan:
+def resolve(
+    experiments: list[Experiment],
+    scale: str,
+    root: str | Path,
+    overrides: list[str] | tuple = (),
+    catalogue: Catalogue | None = None,
+) -> Plan:
     """The plan of `experiments` at `scale` under `root`; every definition error is raised here, before
     any work, as one line naming the file, key and fix."""
     cat = merged_catalogue(experiments, catalogue or load_catalogue())
@@ -142,11 +147,15 @@ def _check_scale(sc: Scale) -> None:
             if getattr(d, key) < 1:
                 raise DefinitionError(f"{w}.data.{key} = {getattr(d, key)!r}; expected an integer >= 1")
     elif not d.episodes or not d.scenes:
-        raise DefinitionError(f"{w}.data: source 'paths' needs data.episodes and data.scenes; fix: --set "
-                              "data.episodes=/path/to/hm3d_ovon_episodes --set data.scenes=/path/to/scene_datasets")
+        raise DefinitionError(
+            f"{w}.data: source 'paths' needs data.episodes and data.scenes; fix: --set "
+            "data.episodes=/path/to/hm3d_ovon_episodes --set data.scenes=/path/to/scene_datasets"
+        )
     if len(set(e.seeds)) < 2 or any(s < 0 for s in e.seeds):
-        raise DefinitionError(f"{w}.evaluate.seeds = {list(e.seeds)}; expected >= 2 distinct seeds >= 0 (the "
-                              "report gives the std over seeds)")
+        raise DefinitionError(
+            f"{w}.evaluate.seeds = {list(e.seeds)}; expected >= 2 distinct seeds >= 0 (the "
+            "report gives the std over seeds)"
+        )
     if e.episodes is not None and e.episodes < 1:
         raise DefinitionError(f"{w}.evaluate.episodes = {e.episodes!r}; expected an integer >= 1 or null (all)")
     if e.workers < 1 or t.nproc_per_node < 0:
@@ -166,8 +175,10 @@ def needed_evals(experiments: list[Experiment], cat: Catalogue) -> list[str]:
     for name in out:
         if name not in cat.evaluate:
             where = next(e.source for e in experiments)
-            raise DefinitionError(f"{where}: evaluation cell {name!r} is not defined; valid: "
-                                  f"{', '.join(sorted(cat.evaluate))} (cells.yaml, or an `evaluate:` section)")
+            raise DefinitionError(
+                f"{where}: evaluation cell {name!r} is not defined; valid: "
+                f"{', '.join(sorted(cat.evaluate))} (cells.yaml, or an `evaluate:` section)"
+            )
     return list(out)
 
 
@@ -186,11 +197,13 @@ def train_order(eval_names: list[str], cat: Catalogue, scale: str) -> list[str]:
         if name in order:
             return
         if name in path:
-            raise DefinitionError(f"cells.yaml: training cells initialise each other in a cycle: "
-                                  f"{' -> '.join([*path, name])}")
+            raise DefinitionError(
+                f"cells.yaml: training cells initialise each other in a cycle: {' -> '.join([*path, name])}"
+            )
         if name not in cat.train:
-            raise DefinitionError(f"{who} names training cell {name!r}, which is not defined; valid: "
-                                  f"{', '.join(sorted(cat.train))}")
+            raise DefinitionError(
+                f"{who} names training cell {name!r}, which is not defined; valid: {', '.join(sorted(cat.train))}"
+            )
         init = train_spec(cat.train[name], scale)[1]
         if init:
             visit(init, (*path, name), f"train.{name}.init")
@@ -212,10 +225,39 @@ def _data_cell(plan: Plan) -> None:
         return
     scenes, episodes = base / "data" / "scenes", base / "data" / "episodes"
     plan.episodes_dir, plan.scenes_dir = episodes, scenes
-    cmds = [["scenes", "generate", "--split", split, "--count", str(n), "--seed", str(d.seed), "--out", str(scenes),
-             "--workers", str(d.workers)] for split, n in (("train", d.train_scenes), ("val", d.val_scenes))]
-    cmds.append(["dataset", "generate", "--scenes", str(scenes), "--out", str(episodes), "--preset", d.preset,
-                 *set_args(d.set), "--workers", str(d.workers), "--no-progress"])
+    cmds = [
+        [
+            "scenes",
+            "generate",
+            "--split",
+            split,
+            "--count",
+            str(n),
+            "--seed",
+            str(d.seed),
+            "--out",
+            str(scenes),
+            "--workers",
+            str(d.workers),
+        ]
+        for split, n in (("train", d.train_scenes), ("val", d.val_scenes))
+    ]
+    cmds.append(
+        [
+            "dataset",
+            "generate",
+            "--scenes",
+            str(scenes),
+            "--out",
+            str(episodes),
+            "--preset",
+            d.preset,
+            *set_args(d.set),
+            "--workers",
+            str(d.workers),
+            "--no-progress",
+        ]
+    )
     plan.cells["data:data"] = Cell("data", "data", cmds, base / "data")
 
 
@@ -232,8 +274,10 @@ def _train_cell(plan: Plan, name: str) -> None:
         raise DefinitionError(f"{where}.recipe = {recipe_name!r}; valid: {', '.join(cat.recipes)} (recipes.yaml)")
     recipe = cat.recipes[recipe_name]
     if sc.name not in recipe.scales:
-        raise DefinitionError(f"recipes.yaml:{recipe_name} has no settings for scale {sc.name!r}; fix: add "
-                              f"scales.{sc.name} (preset and set) to it")
+        raise DefinitionError(
+            f"recipes.yaml:{recipe_name} has no settings for scale {sc.name!r}; fix: add "
+            f"scales.{sc.name} (preset and set) to it"
+        )
     rs = recipe.scales[sc.name]
     init = plan.cells.get(f"train:{init_name}") if init_name else None
     if init is not None and recipe.algo != "ppo":
@@ -247,8 +291,12 @@ def _train_cell(plan: Plan, name: str) -> None:
     if init is not None:
         argv += ["--init", str(init.folder / "policy.pt")]
     argv += ["--data", str(plan.episodes_dir), "--scenes", str(plan.scenes_dir)]
-    values = {**flatten(rs.set), **flatten(tc.set), **flatten(_per_scale(tc, sc.name).set),
-              "text_cache": str(plan.base / "data" / "text_cache.pt")}
+    values = {
+        **flatten(rs.set),
+        **flatten(tc.set),
+        **flatten(_per_scale(tc, sc.name).set),
+        "text_cache": str(plan.base / "data" / "text_cache.pt"),
+    }
     argv += set_args(values)
     argv += ["--out", str(folder)]
     launcher: tuple[str, ...] = ()
@@ -258,11 +306,15 @@ def _train_cell(plan: Plan, name: str) -> None:
     cell.train_cfg = build_train_config(argv, where)
     if init is not None:
         if tc.policy and tc.policy != init.train_cfg.policy.core:
-            raise DefinitionError(f"{where}.policy = {tc.policy!r}, but a fine-tune keeps the core of its init "
-                                  f"{init_name!r} ({init.train_cfg.policy.core}); fix: drop policy or change the init")
+            raise DefinitionError(
+                f"{where}.policy = {tc.policy!r}, but a fine-tune keeps the core of its init "
+                f"{init_name!r} ({init.train_cfg.policy.core}); fix: drop policy or change the init"
+            )
         if init.train_cfg.encoder.image != cell.train_cfg.encoder.image:
-            raise DefinitionError(f"{where}: encoder {cell.train_cfg.encoder.image!r} differs from its init's "
-                                  f"({init.train_cfg.encoder.image!r}); fix: use the same preset/encoder")
+            raise DefinitionError(
+                f"{where}: encoder {cell.train_cfg.encoder.image!r} differs from its init's "
+                f"({init.train_cfg.encoder.image!r}); fix: use the same preset/encoder"
+            )
     cell.total = train_updates(cell.train_cfg, world_size(sc))
     plan.cells[cell.id] = cell
 
@@ -273,8 +325,11 @@ def world_size(sc: Scale) -> int:
     args = list(sc.train.torchrun_args)
     nodes = 1
     for i, a in enumerate(args):
-        value = a.split("=", 1)[1] if a.startswith("--nnodes=") else (args[i + 1] if a == "--nnodes" and i + 1 < len(
-            args) else None)
+        value = (
+            a.split("=", 1)[1]
+            if a.startswith("--nnodes=")
+            else (args[i + 1] if a == "--nnodes" and i + 1 < len(args) else None)
+        )
         if value:
             nodes = int(value.split(":")[-1])
     return sc.train.nproc_per_node * nodes
@@ -299,8 +354,9 @@ def parse_cli(argv: list[str], where: str):
             return build_parser().parse_args(argv)
     except SystemExit:
         lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
-        raise DefinitionError(f"{where}: the command `ovon {shlex.join(argv)}` is refused: "
-                              f"{lines[-1] if lines else 'invalid arguments'}") from None
+        raise DefinitionError(
+            f"{where}: the command `ovon {shlex.join(argv)}` is refused: {lines[-1] if lines else 'invalid arguments'}"
+        ) from None
 
 
 def build_train_config(argv: list[str], where: str):
@@ -323,8 +379,9 @@ def _eval_cell(plan: Plan, name: str) -> None:
         raise DefinitionError(f"{where}.agent is missing; e.g. agent: policy")
     bad = [s for s in ec.splits if s not in VAL_SPLITS]
     if bad or not ec.splits or len(set(ec.splits)) != len(ec.splits):
-        raise DefinitionError(f"{where}.splits = {list(ec.splits)}; expected distinct names among "
-                              f"{', '.join(VAL_SPLITS)}")
+        raise DefinitionError(
+            f"{where}.splits = {list(ec.splits)}; expected distinct names among {', '.join(VAL_SPLITS)}"
+        )
     per = _per_scale(ec, sc.name)
     folder = plan.base / "eval" / name
     argv = ["evaluate", "--agent", ec.agent]
@@ -336,8 +393,16 @@ def _eval_cell(plan: Plan, name: str) -> None:
     agent_args = {**ec.agent_args, **per.agent_args}
     argv += set_args(agent_args, "--agent-arg")
     ev = sc.evaluate
-    argv += ["--data", str(plan.episodes_dir), "--scenes", str(plan.scenes_dir), "--splits", ",".join(ec.splits),
-             "--seeds", ",".join(str(s) for s in ev.seeds)]
+    argv += [
+        "--data",
+        str(plan.episodes_dir),
+        "--scenes",
+        str(plan.scenes_dir),
+        "--splits",
+        ",".join(ec.splits),
+        "--seeds",
+        ",".join(str(s) for s in ev.seeds),
+    ]
     if ev.episodes is not None:
         argv += ["--episodes", str(ev.episodes)]
     if ec.noise:
@@ -376,7 +441,7 @@ def _check_eval_args(argv: list[str], where: str) -> None:
 
 
 def agent_unavailable(agent: str) -> str:
-    """"" when `ovon evaluate --agent NAME` can load the agent here, else why not (one line)."""
+    """ "" when `ovon evaluate --agent NAME` can load the agent here, else why not (one line)."""
     from ovon.agents import load_agent_class
 
     try:
@@ -405,19 +470,24 @@ def check_experiment(exp: Experiment, plan: Plan) -> None:
         for row in exp.table.rows:
             extra = (set(row.evals) | set(row.paper)) - set(cols)
             if extra:
-                raise DefinitionError(f"{w}: row {row.name!r} names unknown column(s) {sorted(extra)}; columns: "
-                                      f"{', '.join(cols)}")
+                raise DefinitionError(
+                    f"{w}: row {row.name!r} names unknown column(s) {sorted(extra)}; columns: {', '.join(cols)}"
+                )
             for col in exp.table.columns:
                 ev = row_eval(row, col.name)
                 if not ev:
                     raise DefinitionError(f"{w}: row {row.name!r} has no evaluation cell for column {col.name!r}")
                 if col.split not in cells[ev].splits:
-                    raise DefinitionError(f"{w}: row {row.name!r}, column {col.name!r} needs split {col.split!r}, "
-                                          f"which evaluation cell {ev!r} does not run (splits: "
-                                          f"{', '.join(cells[ev].splits)})")
+                    raise DefinitionError(
+                        f"{w}: row {row.name!r}, column {col.name!r} needs split {col.split!r}, "
+                        f"which evaluation cell {ev!r} does not run (splits: "
+                        f"{', '.join(cells[ev].splits)})"
+                    )
                 if paper_numbers(row, col.name, f"{w}: row {row.name!r}") is None:
-                    raise DefinitionError(f"{w}: row {row.name!r} has no paper numbers for column {col.name!r}; "
-                                          "fix: add paper.<column>: [SR, SR std, SPL, SPL std]")
+                    raise DefinitionError(
+                        f"{w}: row {row.name!r} has no paper numbers for column {col.name!r}; "
+                        "fix: add paper.<column>: [SR, SR std, SPL, SPL std]"
+                    )
                 entries.add((row.name, col.name))
     for fig in exp.figures:
         missing = [s for s in fig.splits if s not in cells[fig.eval].splits]
@@ -426,11 +496,15 @@ def check_experiment(exp: Experiment, plan: Plan) -> None:
         for g in fig.groups:
             bad = [lb for lb in g.labels if lb not in FAILURE_LABELS]
             if bad or not g.labels:
-                raise DefinitionError(f"{w}: figure {fig.name!r}, group {g.name!r}: labels {list(g.labels)}; "
-                                      f"expected some of {', '.join(FAILURE_LABELS)}")
+                raise DefinitionError(
+                    f"{w}: figure {fig.name!r}, group {g.name!r}: labels {list(g.labels)}; "
+                    f"expected some of {', '.join(FAILURE_LABELS)}"
+                )
             if g.paper and len(g.paper) != len(fig.splits):
-                raise DefinitionError(f"{w}: figure {fig.name!r}, group {g.name!r}: paper has {len(g.paper)} "
-                                      f"values for {len(fig.splits)} splits")
+                raise DefinitionError(
+                    f"{w}: figure {fig.name!r}, group {g.name!r}: paper has {len(g.paper)} "
+                    f"values for {len(fig.splits)} splits"
+                )
             if g.paper_range and len(g.paper_range) != 2:
                 raise DefinitionError(f"{w}: figure {fig.name!r}, group {g.name!r}: paper_range is [lo, hi]")
     ids = set()
@@ -441,19 +515,30 @@ def check_experiment(exp: Experiment, plan: Plan) -> None:
         for chk in f.checks:
             for ref in check_refs(chk):
                 if parse_ref(ref, f"{w}: finding {f.id}") not in entries:
-                    raise DefinitionError(f"{w}: finding {f.id} refers to {ref!r}, which is not a table entry "
-                                          "('ROW @ COLUMN')")
+                    raise DefinitionError(
+                        f"{w}: finding {f.id} refers to {ref!r}, which is not a table entry ('ROW @ COLUMN')"
+                    )
             _check_shape(chk, f"{w}: finding {f.id}")
 
 
 def check_refs(chk) -> list[str]:
-    return [*([chk.target] if chk.target else []), *chk.others, *chk.refs,
-            *(r for p in chk.pairs for r in p), *(r for p in chk.against for r in p)]
+    return [
+        *([chk.target] if chk.target else []),
+        *chk.others,
+        *chk.refs,
+        *(r for p in chk.pairs for r in p),
+        *(r for p in chk.against for r in p),
+    ]
 
 
 def _check_shape(chk, where: str) -> None:
-    need = {"best": ("target", "others"), "greater": ("pairs",), "flat": ("refs",), "drop": ("pairs",),
-            "smaller_drop": ("pairs", "against")}[chk.kind]
+    need = {
+        "best": ("target", "others"),
+        "greater": ("pairs",),
+        "flat": ("refs",),
+        "drop": ("pairs",),
+        "smaller_drop": ("pairs", "against"),
+    }[chk.kind]
     missing = [k for k in need if not getattr(chk, k)]
     if missing:
         raise DefinitionError(f"{where}: a {chk.kind!r} check needs {', '.join(need)} (missing {', '.join(missing)})")

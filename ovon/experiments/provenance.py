@@ -39,12 +39,15 @@ def code_version() -> str:
             timeout=10,
         ).stdout.strip()
         # a new, untracked module in the package runs too (git's ignore rules keep caches out)
-        dirty = dirty or subprocess.run(
-            ["git", "-C", where, "status", "--porcelain", "--untracked-files=all", "--", "."],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        ).stdout.strip()
+        dirty = (
+            dirty
+            or subprocess.run(
+                ["git", "-C", where, "status", "--porcelain", "--untracked-files=all", "--", "."],
+                capture_output=True,
+                text=True,
+                timeout=10,
+            ).stdout.strip()
+        )
     except (OSError, subprocess.SubprocessError):
         return text
     return f"{text} ({rev}{'+dirty' if dirty else ''})" if rev else text

@@ -59,8 +59,11 @@ def eval_records(plan: Plan, cell: Cell) -> list[dict]:
 
     seeds = _done_seeds(read_record(plan, cell))
     splits = set(cell.eval_cell.splits) if cell.eval_cell else None
-    return [r for r in selected_records(cell.folder)
-            if (seeds is None or int(r["seed"]) in seeds) and (splits is None or r["split"] in splits)]
+    return [
+        r
+        for r in selected_records(cell.folder)
+        if (seeds is None or int(r["seed"]) in seeds) and (splits is None or r["split"] in splits)
+    ]
 
 
 def setup_label(plan: Plan, cell: Cell) -> str:
@@ -117,6 +120,7 @@ def _pct(entry: dict, metric: str) -> tuple[float, float]:
 def collect(plan: Plan) -> dict:
     """Everything the report shows, as JSON-able data; paths are written `$ROOT`, `$EPISODES`, `$SCENES`."""
     from ovon.evaluate.results import summarize
+
     statuses = plan_status(plan)
     prov = cell_provenance(plan, statuses, code_version())
     evals: dict[str, dict] = {}
@@ -124,17 +128,27 @@ def collect(plan: Plan) -> dict:
         if cell.kind != "eval":
             continue
         st = statuses[cid]
-        info: dict[str, Any] = {"status": st.state if st.state == "done" else portable_text(plan, str(st)),
-                                "setup": setup_label(plan, cell), "summary": None,
-                                "marked": st.state == "done" and marked_chain(plan, prov, cid)}
+        info: dict[str, Any] = {
+            "status": st.state if st.state == "done" else portable_text(plan, str(st)),
+            "setup": setup_label(plan, cell),
+            "summary": None,
+            "marked": st.state == "done" and marked_chain(plan, prov, cid),
+        }
         if st.state == "done":
             records = eval_records(plan, cell)
             info["summary"] = summarize(records)
             info["records"] = records
         evals[cell.name] = info
-    out = {"experiments": {}, "scale": plan.scale.name, "scale_description": plan.scale.description,
-           "root": ROOT_TOKEN, "command": run_command_line(plan), "paths": path_legend(plan), "provenance": prov,
-           "cells": _cells_info(plan, statuses, prov)}
+    out = {
+        "experiments": {},
+        "scale": plan.scale.name,
+        "scale_description": plan.scale.description,
+        "root": ROOT_TOKEN,
+        "command": run_command_line(plan),
+        "paths": path_legend(plan),
+        "provenance": prov,
+        "cells": _cells_info(plan, statuses, prov),
+    }
     for exp in plan.experiments:
         out["experiments"][exp.name] = experiment_results(exp, evals)
     for info in evals.values():
@@ -163,10 +177,14 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
                     ours = {m: _pct(summ, m) for m in ("sr", "spl")}
                     ours["episodes"] = summ["episodes"]
                     ours["seeds"] = len(summ["seeds"])
-                entry = {"eval": name, "split": col.split, "ours": ours,
-                         "status": ev["status"] if ours is None else "done",
-                         "marked": ours is not None and bool(ev.get("marked")),
-                         "paper": paper_numbers(row, col.name, exp.source)}
+                entry = {
+                    "eval": name,
+                    "split": col.split,
+                    "ours": ours,
+                    "status": ev["status"] if ours is None else "done",
+                    "marked": ours is not None and bool(ev.get("marked")),
+                    "paper": paper_numbers(row, col.name, exp.source),
+                }
                 cells[col.name] = entry
                 entries[(row.name, col.name)] = entry
             setups = list(dict.fromkeys(evals[row_eval(row, c.name)]["setup"] for c in exp.table.columns))
@@ -180,13 +198,30 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
         groups = []
         for g in fig.groups:
             ours = {s: 100.0 * sum(fb[s][lb] for lb in g.labels) for s in fig.splits if s in fb} if fb else None
-            groups.append({"name": g.name, "color": g.color, "labels": list(g.labels), "ours": ours,
-                           "paper": dict(zip(fig.splits, g.paper)) if g.paper else None,
-                           "paper_range": list(g.paper_range) or None})
+            groups.append(
+                {
+                    "name": g.name,
+                    "color": g.color,
+                    "labels": list(g.labels),
+                    "ours": ours,
+                    "paper": dict(zip(fig.splits, g.paper)) if g.paper else None,
+                    "paper_range": list(g.paper_range) or None,
+                }
+            )
         success = {s: 100.0 * fb[s]["success"] for s in fig.splits if s in fb} if fb else None
-        figures.append({"name": fig.name, "caption": fig.caption, "eval": fig.eval, "splits": list(fig.splits),
-                        "setup": ev["setup"], "status": ev["status"], "marked": bool(recs and ev.get("marked")),
-                        "groups": groups, "success": success})
+        figures.append(
+            {
+                "name": fig.name,
+                "caption": fig.caption,
+                "eval": fig.eval,
+                "splits": list(fig.splits),
+                "setup": ev["setup"],
+                "status": ev["status"],
+                "marked": bool(recs and ev.get("marked")),
+                "groups": groups,
+                "success": success,
+            }
+        )
     res["figures"] = figures
 
     def look(source: str):
@@ -196,10 +231,13 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
                 return e["ours"][metric] if e["ours"] else None
             p = e["paper"]
             return (p[metric], p[f"{metric}_std"] or 0.0) if p else None
+
         return lookup
 
-    res["findings"] = [{"id": f.id, "claim": f.claim, "note": f.note, "ours": judge(f, look("ours")),
-                        "paper": judge(f, look("paper"))} for f in exp.findings]
+    res["findings"] = [
+        {"id": f.id, "claim": f.claim, "note": f.note, "ours": judge(f, look("ours")), "paper": judge(f, look("paper"))}
+        for f in exp.findings
+    ]
     return res
 
 
@@ -208,8 +246,17 @@ def run_command_line(plan: Plan) -> str:
     default = flatten(to_dict(plan.catalogue.scales[plan.scale.name]))
     now = flatten(to_dict(plan.scale))
     sets = [f"{k}={render_value(v)}" for k, v in now.items() if default.get(k, object()) != v]
-    words = ["ovon", "experiment", "run", ",".join(e.name for e in plan.experiments), "--scale", plan.scale.name,
-             "--root", ROOT_TOKEN, *(w for kv in sets for w in ("--set", portable_text(plan, kv)))]
+    words = [
+        "ovon",
+        "experiment",
+        "run",
+        ",".join(e.name for e in plan.experiments),
+        "--scale",
+        plan.scale.name,
+        "--root",
+        ROOT_TOKEN,
+        *(w for kv in sets for w in ("--set", portable_text(plan, kv))),
+    ]
     return " ".join(shell_word(w) for w in words)
 
 
@@ -229,10 +276,15 @@ def _cells_info(plan: Plan, statuses: dict[str, Status], prov: dict) -> dict:
     for cid, cell in plan.cells.items():
         rec = read_record(plan, cell) or {}
         mine = prov["cells"].get(cid, {})
-        info = {"status": statuses[cid].state, "detail": portable_text(plan, statuses[cid].detail),
-                "commands": full_commands(plan, cell),
-                "wall_min": round(float(rec.get("wall_s", 0.0)) / 60, 1), "attempts": rec.get("attempts", 0),
-                "code": ", ".join(mine.get("code", [])), "marked": bool(mine.get("marked"))}
+        info = {
+            "status": statuses[cid].state,
+            "detail": portable_text(plan, statuses[cid].detail),
+            "commands": full_commands(plan, cell),
+            "wall_min": round(float(rec.get("wall_s", 0.0)) / 60, 1),
+            "attempts": rec.get("attempts", 0),
+            "code": ", ".join(mine.get("code", [])),
+            "marked": bool(mine.get("marked")),
+        }
         if cell.kind == "train":
             info["updates"] = last_update(cell.folder)
             info["planned_updates"] = cell.total
@@ -274,14 +326,21 @@ def table_markdown(table: dict) -> list[str]:
         lines.append("")
         lines += [f"- `{k}` not run: {v}" for k, v in notes.items()]
     if any(e.get("marked") for r in table["rows"] for e in r["cells"].values()):
-        lines += ["", f"{MARK} its evaluation, or a cell it needs, ran with another commit than most cells or from a "
-                  "dirty tree (table \"Provenance\")."]
-    counts = {(e["ours"]["episodes"], e["ours"]["seeds"]) for r in table["rows"] for e in r["cells"].values()
-              if e["ours"]}
+        lines += [
+            "",
+            f"{MARK} its evaluation, or a cell it needs, ran with another commit than most cells or from a "
+            'dirty tree (table "Provenance").',
+        ]
+    counts = {
+        (e["ours"]["episodes"], e["ours"]["seeds"]) for r in table["rows"] for e in r["cells"].values() if e["ours"]
+    }
     if counts:
         lines.append("")
-        lines.append("Ours: " + ", ".join(f"{n} episodes over {s} seeds" for n, s in sorted(counts))
-                     + " per entry; mean ± std over seeds. Paper: as printed (3 seeds).")
+        lines.append(
+            "Ours: "
+            + ", ".join(f"{n} episodes over {s} seeds" for n, s in sorted(counts))
+            + " per entry; mean ± std over seeds. Paper: as printed (3 seeds)."
+        )
     return lines
 
 
@@ -299,10 +358,17 @@ def findings_markdown(findings: list[dict]) -> list[str]:
 
 
 def markdown(data: dict, figures: dict[str, list[str]]) -> str:
-    parts = [f"# Experiments at scale `{data['scale']}`", "", headline(data["provenance"]), "",
-             data["scale_description"], "",
-             "Each entry: **ours** (mean ± std over evaluation seeds) and the paper's number. A cell that did "
-             "not finish shows as *not run*.", ""]
+    parts = [
+        f"# Experiments at scale `{data['scale']}`",
+        "",
+        headline(data["provenance"]),
+        "",
+        data["scale_description"],
+        "",
+        "Each entry: **ours** (mean ± std over evaluation seeds) and the paper's number. A cell that did "
+        "not finish shows as *not run*.",
+        "",
+    ]
     all_findings = []
     for name, exp in data["experiments"].items():
         parts += [f"## {exp['title']} (`{name}`)", "", f"Paper: {exp['paper_ref']}. {exp['description']}", ""]
@@ -315,19 +381,38 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
         parts += [f"![{p}]({p})" for p in figures.get(name, [])] + [""]
         all_findings += exp["findings"]
     if all_findings:
-        parts += ["## The paper's findings here", "", f"Rules on {RULE_NOTE}; the paper's verdict is the same rule on "
-                  "its own numbers.", "", *findings_markdown(all_findings), ""]
+        parts += [
+            "## The paper's findings here",
+            "",
+            f"Rules on {RULE_NOTE}; the paper's verdict is the same rule on its own numbers.",
+            "",
+            *findings_markdown(all_findings),
+            "",
+        ]
     parts += ["## Training", "", "| cell | status | updates | wall time (min) | attempts |", "|---|---|---|---|---|"]
     for cid, info in data["cells"].items():
         if cid.startswith("train:"):
             mark = MARK if info["marked"] else ""
-            parts.append(f"| {cid[6:]}{mark} | {info['status']} | {info['updates'] or '–'} / "
-                         f"{info['planned_updates'] or '?'}"
-                         f" | {info['wall_min']} | {info['attempts']} |")
+            parts.append(
+                f"| {cid[6:]}{mark} | {info['status']} | {info['updates'] or '–'} / "
+                f"{info['planned_updates'] or '?'}"
+                f" | {info['wall_min']} | {info['attempts']} |"
+            )
     legend = "; ".join(f"`{k}` is {v}" for k, v in data["paths"].items())
-    parts += ["", *[f"![curve {p}]({p})" for p in figures.get("_curves", [])], "",
-              "## Provenance", "", *provenance_markdown(data["provenance"]), "",
-              "## Commands", "", f"Every cell's command (all of them: `{data['command']}`); {legend}.", "", "```"]
+    parts += [
+        "",
+        *[f"![curve {p}]({p})" for p in figures.get("_curves", [])],
+        "",
+        "## Provenance",
+        "",
+        *provenance_markdown(data["provenance"]),
+        "",
+        "## Commands",
+        "",
+        f"Every cell's command (all of them: `{data['command']}`); {legend}.",
+        "",
+        "```",
+    ]
     for cid, info in data["cells"].items():
         code = f", {info['code']}" if info["code"] else ""
         mark = f" {MARK}" if info["marked"] else ""

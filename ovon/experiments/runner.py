@@ -123,8 +123,14 @@ def run_command(cell: Cell, argv: list[str], log: Path, on_poll=None, on_start=N
     with open(log, "ab") as f:
         f.write(f"\n===== {time.strftime('%Y-%m-%d %H:%M:%S')} {display(cell, argv)}\n".encode())
         f.flush()
-        proc = subprocess.Popen(exec_argv(cell, argv), stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                env=child_env(), preexec_fn=_parent_death_signal())
+        proc = subprocess.Popen(
+            exec_argv(cell, argv),
+            stdout=f,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            env=child_env(),
+            preexec_fn=_parent_death_signal(),
+        )
     if on_start is not None:
         on_start(proc.pid)
     try:
@@ -163,12 +169,22 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
     """Run the cell's commands under its record; returns the exit code (0 = finished)."""
     rec = read_record(plan, cell) or {}
     if rec.get("state") == "running":  # the attempt before died with its runner: keep what it ran with
-        rec.setdefault("history", []).append({"started": rec.get("started"), "wall_s": None, "rc": "killed",
-                                              "code": rec.get("code")})
-    rec.update({"kind": cell.kind, "name": cell.name, "identity": identity(plan, cell), "state": "running",
-                "attempts": int(rec.get("attempts", 0)) + 1, "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-                "code": code_version(), "config": resolved_config(plan, cell),
-                "inputs": inputs(plan, cell)})  # an unfinished attempt's inputs too: see `cell_status`
+        rec.setdefault("history", []).append(
+            {"started": rec.get("started"), "wall_s": None, "rc": "killed", "code": rec.get("code")}
+        )
+    rec.update(
+        {
+            "kind": cell.kind,
+            "name": cell.name,
+            "identity": identity(plan, cell),
+            "state": "running",
+            "attempts": int(rec.get("attempts", 0)) + 1,
+            "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "code": code_version(),
+            "config": resolved_config(plan, cell),
+            "inputs": inputs(plan, cell),
+        }
+    )  # an unfinished attempt's inputs too: see `cell_status`
     write_record(plan, cell, rec)
     log = log_path(plan, cell)
     t0 = time.perf_counter()
@@ -220,8 +236,15 @@ def _finish_record(plan: Plan, cell: Cell, rec: dict, t0: float) -> None:
         rec["code_end"] = end
     else:
         rec.pop("code_end", None)
-    rec.setdefault("history", []).append({"started": rec["started"], "wall_s": round(wall, 1), "rc": rec.get("rc"),
-                                          "code": rec.get("code"), **({"code_end": end} if "code_end" in rec else {})})
+    rec.setdefault("history", []).append(
+        {
+            "started": rec["started"],
+            "wall_s": round(wall, 1),
+            "rc": rec.get("rc"),
+            "code": rec.get("code"),
+            **({"code_end": end} if "code_end" in rec else {}),
+        }
+    )
     write_record(plan, cell, rec)
 
 
@@ -270,16 +293,23 @@ def _preflight(plan: Plan, ids: list[str], statuses: dict[str, Status], redone: 
         changed = [f"{c} ({statuses[c].detail})" for c in stale]
 
         # a bare name (`rl`) takes the cell's training and evaluation: only where both are stale
-        names = ",".join(dict.fromkeys(
-            bare if set(match_cells(plan, [bare := c.split(":", 1)[1]])) <= set(stale) else c for c in stale))
-        raise DefinitionError(f"cell(s) changed since they ran: {'; '.join(changed)}; fix: --redo {names} recomputes "
-                              "them and what depends on them (old folders are kept as <folder>.old-N), or restore "
-                              "the definition")
+        names = ",".join(
+            dict.fromkeys(
+                bare if set(match_cells(plan, [bare := c.split(":", 1)[1]])) <= set(stale) else c for c in stale
+            )
+        )
+        raise DefinitionError(
+            f"cell(s) changed since they ran: {'; '.join(changed)}; fix: --redo {names} recomputes "
+            "them and what depends on them (old folders are kept as <folder>.old-N), or restore "
+            "the definition"
+        )
     data = plan.cells["data:data"]
     if not data.commands and statuses["data:data"].state != "done":
-        raise DefinitionError(f"scale {plan.scale.name!r} reads its episodes from {plan.episodes_dir}, which holds no "
-                              "episode files (*.json.gz); fix: --set data.episodes=/path/to/hm3d_ovon_episodes --set "
-                              "data.scenes=/path/to/scene_datasets")
+        raise DefinitionError(
+            f"scale {plan.scale.name!r} reads its episodes from {plan.episodes_dir}, which holds no "
+            "episode files (*.json.gz); fix: --set data.episodes=/path/to/hm3d_ovon_episodes --set "
+            "data.scenes=/path/to/scene_datasets"
+        )
 
 
 def redo(plan: Plan, cascade: list[str], console: Console) -> None:
@@ -302,9 +332,16 @@ def redo(plan: Plan, cascade: list[str], console: Console) -> None:
             lock.release()
 
 
-def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None = None,
-        redo_cells: list[str] | tuple = (), dry_run: bool = False, wait: bool = True, write_report: bool = True,
-        console: Console | None = None) -> RunResult:
+def run(
+    plan: Plan,
+    only: list[str] | None = None,
+    shard: tuple[int, int] | None = None,
+    redo_cells: list[str] | tuple = (),
+    dry_run: bool = False,
+    wait: bool = True,
+    write_report: bool = True,
+    console: Console | None = None,
+) -> RunResult:
     """Run the plan's selected cells (see the module docstring); `wait`: when cells are being run by
     another process, wait for them instead of leaving them (and what needs them) for a later run."""
 
@@ -313,19 +350,26 @@ def run(plan: Plan, only: list[str] | None = None, shard: tuple[int, int] | None
     statuses = plan_status(plan)
     cascade = dependents(plan, match_cells(plan, list(redo_cells), flag="--redo")) if redo_cells else []
     if "data:data" in cascade and not plan.cells["data:data"].commands:
-        raise DefinitionError(f"--redo data: scale {plan.scale.name!r} reads your own dataset ({plan.episodes_dir}), "
-                              "which the runner never moves; fix: --redo the training or evaluation cells instead")
+        raise DefinitionError(
+            f"--redo data: scale {plan.scale.name!r} reads your own dataset ({plan.episodes_dir}), "
+            "which the runner never moves; fix: --redo the training or evaluation cells instead"
+        )
     outside = [c for c in cascade if c not in ids]
     if outside:  # moved aside but never recomputed: what reads them would then be missing
-        raise DefinitionError(f"--redo {','.join(redo_cells)} also recomputes {', '.join(outside)} (they read what "
-                              "is redone), which --only/--shard leaves out; fix: add them to --only, or drop --only "
-                              "/ --shard")
+        raise DefinitionError(
+            f"--redo {','.join(redo_cells)} also recomputes {', '.join(outside)} (they read what "
+            "is redone), which --only/--shard leaves out; fix: add them to --only, or drop --only "
+            "/ --shard"
+        )
     for cid in cascade:
         statuses[cid] = Status("redo", "its old folder will be kept as <folder>.old-N")
     unknown = [c for c in config_unknown(plan, ids) if c not in cascade]
     if unknown:
-        say(console, f"note: {len(unknown)} finished cell(s) ran before ovon recorded resolved configs "
-                     f"({', '.join(unknown)}): only their commands are compared; --redo them to record it")
+        say(
+            console,
+            f"note: {len(unknown)} finished cell(s) ran before ovon recorded resolved configs "
+            f"({', '.join(unknown)}): only their commands are compared; --redo them to record it",
+        )
     if dry_run:
         head = f"{plan.names} at scale {plan.scale.name}, root {plan.root}: {len(ids)} of {len(plan.cells)} cells"
         say(console, head + (f" (shard {shard[0]}/{shard[1]})" if shard else ""))
@@ -350,8 +394,18 @@ def _loop(plan: Plan, ids: list[str], wait: bool, console: Console) -> RunResult
 
     result = RunResult()
     blocked: set[str] = set()  # failed in this run, or needing a failed cell
-    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                        console=console, transient=True) if console.is_terminal else None
+    progress = (
+        Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=True,
+        )
+        if console.is_terminal
+        else None
+    )
     if progress is not None:
         progress.start()
     try:
@@ -396,8 +450,9 @@ def _loop(plan: Plan, ids: list[str], wait: bool, console: Console) -> RunResult
     return result
 
 
-def _run_one(plan: Plan, cell: Cell, st: Status, progress, console: Console, result: RunResult,
-             blocked: set[str]) -> None:
+def _run_one(
+    plan: Plan, cell: Cell, st: Status, progress, console: Console, result: RunResult, blocked: set[str]
+) -> None:
     cmds = commands_to_run(cell)
     say(console, f"{cell.id}: {st} -> " + " && ".join(display(cell, a) for a in cmds))
     t0 = time.perf_counter()
@@ -409,5 +464,8 @@ def _run_one(plan: Plan, cell: Cell, st: Status, progress, console: Console, res
         return
     result.failed.append(cell.id)
     blocked.add(cell.id)
-    say(console, f"{cell.id}: FAILED (exit {rc}) after {minutes:.1f} min; log {log_path(plan, cell)}:\n"
-                 f"{log_tail(log_path(plan, cell))}")
+    say(
+        console,
+        f"{cell.id}: FAILED (exit {rc}) after {minutes:.1f} min; log {log_path(plan, cell)}:\n"
+        f"{log_tail(log_path(plan, cell))}",
+    )

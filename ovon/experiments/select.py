@@ -15,7 +15,7 @@ WEIGHT = {"train": 4, "eval": 1}  # a training cell costs several evaluations
 
 
 def parse_shard(text: str | None) -> tuple[int, int] | None:
-    """"i/n" (0-based: 0/2 and 1/2 are the two halves) -> (i, n)."""
+    """ "i/n" (0-based: 0/2 and 1/2 are the two halves) -> (i, n)."""
     if not text:
         return None
     i, sep, n = text.partition("/")
@@ -24,8 +24,10 @@ def parse_shard(text: str | None) -> tuple[int, int] | None:
     except ValueError:
         index, count = -1, 0
     if not sep or count < 1 or not 0 <= index < count:
-        raise DefinitionError(f"--shard {text!r}: expected i/n with 0 <= i < n (0-based), e.g. --shard 0/2 and "
-                              "--shard 1/2 on two machines")
+        raise DefinitionError(
+            f"--shard {text!r}: expected i/n with 0 <= i < n (0-based), e.g. --shard 0/2 and "
+            "--shard 1/2 on two machines"
+        )
     return index, count
 
 
@@ -39,8 +41,10 @@ def match_cells(plan: Plan, names: list[str], flag: str = "--only") -> list[str]
             hits = [DATA]
         if not hits:
             valid = sorted({c.split(":", 1)[1] for c in plan.cells})
-            raise DefinitionError(f"{flag}: no cell {name!r} in {plan.names}; valid: {', '.join(valid)} (or "
-                                  f"train:NAME / eval:NAME); fix: {flag} one of them")
+            raise DefinitionError(
+                f"{flag}: no cell {name!r} in {plan.names}; valid: {', '.join(valid)} (or "
+                f"train:NAME / eval:NAME); fix: {flag} one of them"
+            )
         out += [h for h in hits if h not in out]
     return out
 

@@ -78,8 +78,9 @@ def read_record(plan: Plan, cell: Cell) -> dict | None:
         return None
     except NotADirectoryError:
         check_output_path(plan.root, "--root", folder=True, writable=False, error=DefinitionError)
-        check_output_path(path.parent, f"--root {plan.root}: the cells folder", folder=True, writable=False,
-                          error=DefinitionError)
+        check_output_path(
+            path.parent, f"--root {plan.root}: the cells folder", folder=True, writable=False, error=DefinitionError
+        )
         return {"state": "unreadable"}
     except (OSError, ValueError):
         return {"state": "unreadable"}
@@ -103,7 +104,7 @@ def path_tokens(plan: Plan, legacy: bool = False) -> list[tuple[str, str]]:
 def _tokenised(path: str, pairs: list[tuple[str, str]]) -> str:
     for prefix, token in pairs:
         if path == prefix or path.startswith(prefix.rstrip("/") + "/"):
-            return token + path[len(prefix.rstrip("/")):]
+            return token + path[len(prefix.rstrip("/")) :]
     return path
 
 
@@ -231,8 +232,10 @@ def same_commands(recorded: list[str] | None, plan: Plan, cell: Cell, what) -> b
         words = [_normal(shlex.split(c), cell.kind) for c in recorded]
     except ValueError:
         return False
-    return any(words == [_normal(shlex.split(c), cell.kind) for c in what(plan, cell, legacy=legacy)]
-               for legacy in (False, True))
+    return any(
+        words == [_normal(shlex.split(c), cell.kind) for c in what(plan, cell, legacy=legacy)]
+        for legacy in (False, True)
+    )
 
 
 def first_difference(old: list[str], new: list[str]) -> str:
@@ -246,7 +249,7 @@ def first_difference(old: list[str], new: list[str]) -> str:
                 opt = ta[i - 1] + " " if i and ta[i - 1].startswith("--") and ta[i - 1] == tb[i - 1] else ""
                 return f"{opt}{x} -> {opt}{y}"
         if len(ta) != len(tb):
-            extra = ta[len(tb):] or tb[len(ta):]
+            extra = ta[len(tb) :] or tb[len(ta) :]
             return f"{'removed' if len(ta) > len(tb) else 'added'} {' '.join(extra[:4])}"
     return ""
 
@@ -256,8 +259,20 @@ def first_difference(old: list[str], new: list[str]) -> str:
 # episodes, splits): they may change without making a finished cell stale. Inputs (the dataset, a
 # checkpoint) are compared by content (`inputs`), not by path.
 CONFIG_MAY_CHANGE = {
-    "train": ("env_workers", "threads", "rollout_threads", "device", "encoder.device", "progress", "log_every",
-              "checkpoint_every", "keep_checkpoints", "text_cache", "bc.record_workers", *TRAIN_BUDGET),
+    "train": (
+        "env_workers",
+        "threads",
+        "rollout_threads",
+        "device",
+        "encoder.device",
+        "progress",
+        "log_every",
+        "checkpoint_every",
+        "keep_checkpoints",
+        "text_cache",
+        "bc.record_workers",
+        *TRAIN_BUDGET,
+    ),
     "eval": ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "name"),
     "data": (),
 }
@@ -315,7 +330,7 @@ def _tokenised_values(plan: Plan, value: Any) -> Any:
 
 
 def config_change(plan: Plan, cell: Cell, record: dict) -> str:
-    """"" when the cell's recorded resolved config is its config now (or either is unknown), else the
+    """ "" when the cell's recorded resolved config is its config now (or either is unknown), else the
     first differing key, e.g. `finetune.anchor "none" -> "kl"` (and how many more differ)."""
     old = record.get("config")
     if not isinstance(old, dict):
@@ -443,8 +458,11 @@ def scenes_fingerprint(plan: Plan) -> str | None:
 def dataset_fingerprints(plan: Plan) -> dict[str, str | None]:
     """The episodes' and the scenes' identities, which every non-data cell reads. `data` (names and sizes)
     is kept beside `episodes` (content) so that records from before the content was recorded still compare."""
-    return {"data": data_fingerprint(plan), "episodes": episodes_content_fingerprint(plan),
-            "scenes": scenes_fingerprint(plan)}
+    return {
+        "data": data_fingerprint(plan),
+        "episodes": episodes_content_fingerprint(plan),
+        "scenes": scenes_fingerprint(plan),
+    }
 
 
 def inputs(plan: Plan, cell: Cell, dataset: dict | None = None) -> dict[str, Any]:
@@ -549,8 +567,9 @@ def changed_inputs(plan: Plan, cell: Cell, rec: dict, dataset: dict | None = Non
     return [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
 
 
-def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock: bool = True,
-                dataset: dict | None = None) -> Status:
+def cell_status(
+    plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock: bool = True, dataset: dict | None = None
+) -> Status:
     """The cell's status given the statuses of the cells before it (`statuses`, by id); `dataset` as in
     `inputs`."""
     if cell.unavailable:
@@ -581,13 +600,17 @@ def cell_status(plan: Plan, cell: Cell, statuses: dict[str, Status], check_lock:
         stale = [d for d in cell.deps if statuses.get(d, Status("done")).state in ("changed", "redo")]
         if stale:
             return Status("changed", f"{', '.join(stale)}, which it reads, changed since it ran")
-        extended = [d for d in cell.deps if statuses.get(d, Status("done")).state == "partial"
-                    and statuses[d].detail.startswith(EXTEND)]
+        extended = [
+            d
+            for d in cell.deps
+            if statuses.get(d, Status("done")).state == "partial" and statuses[d].detail.startswith(EXTEND)
+        ]
         if extended:
             return Status("changed", f"{', '.join(extended)}, which it reads, is to be extended")
         if not same_commands(rec.get("commands"), plan, cell, full_commands):
-            why = first_difference(rec.get("commands") or [], _in_form_of(rec.get("commands"), plan, cell,
-                                                                         full_commands))
+            why = first_difference(
+                rec.get("commands") or [], _in_form_of(rec.get("commands"), plan, cell, full_commands)
+            )
             return Status("partial", f"{EXTEND}: {why}")
         return Status("done", f"{rec.get('wall_s', 0) / 60:.1f} min")
     waiting = [d for d in cell.deps if statuses.get(d, Status("done")).state != "done"]

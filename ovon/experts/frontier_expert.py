@@ -47,8 +47,12 @@ from ovon.sim.types import AgentState
 class FrontierExpert:
     """Frontier-exploration expert; `timing` holds the last step's ms per phase for the benchmark."""
 
-    def __init__(self, cfg: FrontierExpertConfig | None = None, body: Embodiment | None = None,
-                 distance_field_fn: DistanceFieldFn | None = None):
+    def __init__(
+        self,
+        cfg: FrontierExpertConfig | None = None,
+        body: Embodiment | None = None,
+        distance_field_fn: DistanceFieldFn | None = None,
+    ):
         """`body`: turn angle, step, FOV and success radius (default: those of the default sim/task
         configs; `ovon.experts.rig.make_expert` derives them from the run's configs)."""
         self.cfg = cfg or FrontierExpertConfig()
@@ -88,7 +92,9 @@ class FrontierExpert:
             self._bcell = np.empty((32, cap), dtype=np.int64)  # frontier search bucket queue
             self._bg = np.empty((32, cap), dtype=np.int64)
             self.steering = Steering(
-                grid, math.radians(cfg.turn_threshold_deg), math.radians(self.body.turn_angle_deg),
+                grid,
+                math.radians(cfg.turn_threshold_deg),
+                math.radians(self.body.turn_angle_deg),
                 self.body.forward_step_m,
             )
         assert self.explored_map is not None and self.frontier_map is not None

@@ -24,5 +24,9 @@ class Embodiment:
     @classmethod
     def of(cls, sim: SimConfig | None = None, task: TaskConfig | None = None) -> Embodiment:
         sim, task = sim or SimConfig(), task or TaskConfig()
-        return cls(float(sim.agent.turn_angle_deg), float(sim.agent.forward_step), float(sim.camera.hfov_deg),
-                   float(task.success_distance))
+        return cls(
+            float(sim.agent.turn_angle_deg),
+            float(sim.agent.forward_step),
+            float(sim.camera.hfov_deg),
+            float(task.success_distance),
+        )

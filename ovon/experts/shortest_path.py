@@ -133,7 +133,9 @@ class ShortestPathExpert:
         self.grid = grid
         self.follower = GoalFollower(grid, goal_viewpoints, fn, cfg.lookahead_m)
         self.steering = Steering(
-            grid, math.radians(cfg.turn_threshold_deg), math.radians(self.body.turn_angle_deg),
+            grid,
+            math.radians(cfg.turn_threshold_deg),
+            math.radians(self.body.turn_angle_deg),
             self.body.forward_step_m,
         )
         self.mode = "idle"

@@ -139,8 +139,21 @@ class ExploredMap:
         rmin, rmax, cmin, cmax = cone_bbox(row, col, yaw, self.fov_deg, self.range_cells, (rows, cols))
         return int(
             _cone_update(
-                self.transparent, self.explored, int(row), int(col), fr, fc, cos_half, self.range_cells,
-                rmin, rmax, cmin, cmax, out_r, out_c, update,
+                self.transparent,
+                self.explored,
+                int(row),
+                int(col),
+                fr,
+                fc,
+                cos_half,
+                self.range_cells,
+                rmin,
+                rmax,
+                cmin,
+                cmax,
+                out_r,
+                out_c,
+                update,
             )
         )
 

@@ -66,8 +66,11 @@ class EncoderConfig:
 
     rules: ClassVar = (
         rule(("oracle_depth_grid",), lambda g: (g[0] == 0) == (g[1] == 0), "oracle_depth_grid both 0 or both > 0"),
-        rule(("image", "oracle_depth_grid"), lambda i, g: i != "depth-grid" or g[0] > 0,
-             "oracle_depth_grid > 0 for the depth-grid encoder"),
+        rule(
+            ("image", "oracle_depth_grid"),
+            lambda i, g: i != "depth-grid" or g[0] > 0,
+            "oracle_depth_grid > 0 for the depth-grid encoder",
+        ),
     )
 
 
@@ -104,8 +107,11 @@ class PolicyConfig:
 
     # RoPE rotates pairs of channels of each head, so a head's width must be even.
     rules: ClassVar = (
-        rule(("hidden", "heads"), lambda h, n: h % n == 0 and (h // n) % 2 == 0,
-             "hidden divisible by heads into an even head width"),
+        rule(
+            ("hidden", "heads"),
+            lambda h, n: h % n == 0 and (h // n) % 2 == 0,
+            "hidden divisible by heads into an even head width",
+        ),
     )
 
 

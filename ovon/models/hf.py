@@ -18,8 +18,13 @@ _LOCK = threading.Lock()
 _LOADED: dict[tuple[str, str, str], tuple[Any, Any, Any]] = {}
 
 
-def load_pretrained(kind: str, name_or_path: str, device: str, classes: Callable[[], tuple[Any, Any, Any]],
-                    missing: Callable[[Exception], str]) -> tuple[Any, Any, Any]:
+def load_pretrained(
+    kind: str,
+    name_or_path: str,
+    device: str,
+    classes: Callable[[], tuple[Any, Any, Any]],
+    missing: Callable[[Exception], str],
+) -> tuple[Any, Any, Any]:
     """(model, image processor, tokenizer) of `name_or_path` (a hub name in the local cache, or a
     `save_pretrained` folder). `classes()` returns the three transformers classes (imported only when a
     model is loaded); `missing(err)` is the one-line message when the files are not there."""

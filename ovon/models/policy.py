@@ -65,8 +65,10 @@ class ActorCritic(nn.Module):
                 raise ValueError("policy.goal_similarity needs the encoder config (which parts are text-aligned)")
             self.sim_parts = text_aligned_parts(encoder_cfg)
             if self.sim_parts == 0 or self.sim_parts * text_dim > image_dim:
-                raise ValueError(f"policy.goal_similarity: image encoder {encoder_cfg.image!r} has no goal-text-space "
-                                 "parts; set policy.goal_similarity=false")
+                raise ValueError(
+                    f"policy.goal_similarity: image encoder {encoder_cfg.image!r} has no goal-text-space "
+                    "parts; set policy.goal_similarity=false"
+                )
         # prev_action_dim 0 = no previous-action input: with little data the policy otherwise learns to
         # repeat its last action (the "copycat" shortcut) and keeps pressing MOVE_FORWARD into walls.
         self.prev_action_emb = nn.Embedding(cfg.num_actions + 1, cfg.prev_action_dim) if cfg.prev_action_dim else None
@@ -100,8 +102,9 @@ class ActorCritic(nn.Module):
             goal_emb = goal_emb.unsqueeze(-2)
         goal_emb = goal_emb.expand(*image_emb.shape[:-1], goal_emb.shape[-1])
         dtype = torch.float32 if image_emb.dtype in NARROW_FLOATS else image_emb.dtype
-        out = torch.empty(*image_emb.shape[:-1], image_emb.shape[-1] + goal_emb.shape[-1], dtype=dtype,
-                          device=image_emb.device)
+        out = torch.empty(
+            *image_emb.shape[:-1], image_emb.shape[-1] + goal_emb.shape[-1], dtype=dtype, device=image_emb.device
+        )
         out[..., : image_emb.shape[-1]] = image_emb
         out[..., image_emb.shape[-1] :] = goal_emb
         return out
@@ -312,15 +315,16 @@ def read_policy_file(path: str | Path, flag: str = "policy", map_location: str |
         raise FileNotFoundError(f"{where}: {p} does not exist; {fix}")
     if p.stat().st_size == 0:
         raise ValueError(f"{where}: {p} is empty; {fix}")
-    resume_state = (f"{where}: {p} is a training run's resume state, not a policy; fix: pass "
-                    f"{p.parent / 'policy.pt'}")
+    resume_state = f"{where}: {p} is a training run's resume state, not a policy; fix: pass {p.parent / 'policy.pt'}"
     try:
         ckpt = load_weights_file(p, map_location)
     except Exception as e:  # noqa: BLE001 - torch raises many types (unpickling, zip, EOF) for a bad file
         if p.name == "checkpoint.pt":
             raise ValueError(resume_state) from None
-        raise ValueError(f"{where}: {p} is not a checkpoint torch can read ({type(e).__name__}: truncated, or not "
-                         f"written by torch.save); {fix}") from None
+        raise ValueError(
+            f"{where}: {p} is not a checkpoint torch can read ({type(e).__name__}: truncated, or not "
+            f"written by torch.save); {fix}"
+        ) from None
     if isinstance(ckpt, dict) and {"optimizer", "ranks"} <= ckpt.keys():
         raise ValueError(resume_state)
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:

@@ -78,7 +78,10 @@ class OracleVLScorer:
         self.cfg = cfg or ScorerConfig()
         self.text = text_encoder if text_encoder is not None else make_text_encoder()
         self.encoder = OracleVLEncoder(
-            self.text, grid=1, include_global=False, noise_std=self.cfg.oracle_noise_std,
+            self.text,
+            grid=1,
+            include_global=False,
+            noise_std=self.cfg.oracle_noise_std,
             dropout=self.cfg.oracle_dropout,
         )
         self._scene_key: object = None

@@ -91,8 +91,9 @@ def noise_table(rows: list[tuple[str, str, dict]]) -> str:
     return "\n".join(lines)
 
 
-def markdown_report(runs: list[tuple[str, list[dict]]], metas: list[dict] | None = None,
-                    skipped: list[list[str]] | None = None) -> str:
+def markdown_report(
+    runs: list[tuple[str, list[dict]]], metas: list[dict] | None = None, skipped: list[list[str]] | None = None
+) -> str:
     """`runs` = (row name, records); `metas` (run.json per run) adds the noise table when any run has noise;
     `skipped` (`load_skipped` per run) lists the episodes each run skipped before it ran."""
     rows = {name: summarize(recs) for name, recs in runs}

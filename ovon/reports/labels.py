@@ -15,7 +15,7 @@ BUILTIN_LABELS = {
 
 
 def noise_label(meta: dict) -> str:
-    """"" without noise, else e.g. "actuation:ilqr, odometry" (from the run's sim.noise)."""
+    """ "" without noise, else e.g. "actuation:ilqr, odometry" (from the run's sim.noise)."""
     noise = (meta.get("sim") or {}).get("noise") or {}
     parts = []
     if noise.get("actuation", "none") != "none":

@@ -42,8 +42,9 @@ class TopDown:
         img[nav] = (200, 200, 200)
         self.grid = grid
         self.scale = size / max(nav.shape)
-        self.base = cv2.resize(img, (int(nav.shape[1] * self.scale), int(nav.shape[0] * self.scale)),
-                               interpolation=cv2.INTER_NEAREST)
+        self.base = cv2.resize(
+            img, (int(nav.shape[1] * self.scale), int(nav.shape[0] * self.scale)), interpolation=cv2.INTER_NEAREST
+        )
         for lo, hi in goal_boxes:
             cv2.rectangle(self.base, self.px(lo), self.px(hi), (220, 60, 60), -1)
         for v in viewpoints:
@@ -97,8 +98,16 @@ class AgentView:
                 self.last = _fit(np.asarray(img, dtype=np.uint8), self.h)
         panel = self.last.copy() if self.last is not None else np.full((self.h, self.h, 3), 55, np.uint8)
         if self.diverged is not None:
-            cv2.putText(panel, f"agent left the record after step {self.diverged}", (6, self.h - 8),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 40, 40), 1, cv2.LINE_AA)
+            cv2.putText(
+                panel,
+                f"agent left the record after step {self.diverged}",
+                (6, self.h - 8),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.45,
+                (255, 40, 40),
+                1,
+                cv2.LINE_AA,
+            )
         return panel
 
 
@@ -113,8 +122,10 @@ def _agent_view(meta: dict, spec, ep_seed: int, sim: SimConfig, h: int) -> Agent
     try:
         agent = make_agent(meta["agent"], **meta.get("agent_kwargs", {}))
     except Exception as e:  # noqa: BLE001 - the constructor is user code: one line, with the way out
-        raise AgentError(f"agent {meta['agent']!r} of this run cannot be rebuilt for its debug panel "
-                         f"({type(e).__name__}: {' '.join(str(e).split())[:160]}); fix: pass --no-agent-view") from None
+        raise AgentError(
+            f"agent {meta['agent']!r} of this run cannot be rebuilt for its debug panel "
+            f"({type(e).__name__}: {' '.join(str(e).split())[:160]}); fix: pass --no-agent-view"
+        ) from None
     return AgentView(agent, episode_info(spec, ep_seed, sim), h)
 
 
@@ -142,28 +153,42 @@ def run_input(run_dir: Path, meta: dict, key: str, given: str | None = None) -> 
     if recorded and Path(stored).exists():  # the project moved with its run folders: run from its new root
         return stored
     if recorded:
-        raise FileNotFoundError(f"{run_dir}/run.json: {key} {stored!r} was {recorded} when the evaluation ran "
-                                f"(relative to the folder it ran in), and that no longer exists; fix: put it back "
-                                f"at {recorded}, or pass its new path (`ovon video --{key} PATH`, "
-                                f"render_video({key}=...))")
+        raise FileNotFoundError(
+            f"{run_dir}/run.json: {key} {stored!r} was {recorded} when the evaluation ran "
+            f"(relative to the folder it ran in), and that no longer exists; fix: put it back "
+            f"at {recorded}, or pass its new path (`ovon video --{key} PATH`, "
+            f"render_video({key}=...))"
+        )
     if not Path(stored).exists():
-        raise FileNotFoundError(f"{run_dir}/run.json: {key} {stored!r} is relative to the folder `ovon evaluate` "
-                                f"ran in and does not exist from {Path.cwd()}; fix: run `ovon video` from that "
-                                "folder")
+        raise FileNotFoundError(
+            f"{run_dir}/run.json: {key} {stored!r} is relative to the folder `ovon evaluate` "
+            f"ran in and does not exist from {Path.cwd()}; fix: run `ovon video` from that "
+            "folder"
+        )
     return stored
 
 
-def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: str | None = None,
-                 seed: int | None = None, fps: int = 8, scene: str | None = None,
-                 agent_view: bool = True, data: str | None = None, scenes: str | None = None) -> Path:
+def render_video(
+    run_dir: str | Path,
+    episode_id: str,
+    out: str | Path,
+    split: str | None = None,
+    seed: int | None = None,
+    fps: int = 8,
+    scene: str | None = None,
+    agent_view: bool = True,
+    data: str | None = None,
+    scenes: str | None = None,
+) -> Path:
     """`agent_view`: add the agent's `debug_frame` panel when its class has one (see the module docstring).
     `data` / `scenes`: the episode dataset and scenes roots when they moved (default: the run's own,
     see `run_input`). `out` is checked before the episode is replayed (rendering it takes a while)."""
     from ovon.env import make_objectnav
     from ovon.evaluate.harness import load_specs
 
-    out = check_output_path(out, "--out", expected="the path of an .mp4 file", example="episode.mp4",
-                            suffixes=VIDEO_SUFFIXES)
+    out = check_output_path(
+        out, "--out", expected="the path of an .mp4 file", example="episode.mp4", suffixes=VIDEO_SUFFIXES
+    )
     run_dir = Path(run_dir)
     meta_path = run_dir / "run.json"
     if not meta_path.exists():
@@ -173,13 +198,22 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
         if not isinstance(meta, dict):
             raise ValueError(f"holds a {type(meta).__name__}, not an object")
     except (ValueError, RecursionError) as e:
-        raise ValueError(f"{meta_path} is unreadable ({type(e).__name__}); fix: re-run the `ovon evaluate` that "
-                         "wrote it") from None
-    meta = {**meta, "data": run_input(run_dir, meta, "data", data),
-            "scenes": run_input(run_dir, meta, "scenes", scenes)}
-    recs = [r for r in read_records(run_dir) if str(r["episode_id"]) == str(episode_id)
-            and (split is None or r["split"] == split) and (seed is None or int(r["seed"]) == seed)
-            and (scene is None or scene in r["scene"])]
+        raise ValueError(
+            f"{meta_path} is unreadable ({type(e).__name__}); fix: re-run the `ovon evaluate` that wrote it"
+        ) from None
+    meta = {
+        **meta,
+        "data": run_input(run_dir, meta, "data", data),
+        "scenes": run_input(run_dir, meta, "scenes", scenes),
+    }
+    recs = [
+        r
+        for r in read_records(run_dir)
+        if str(r["episode_id"]) == str(episode_id)
+        and (split is None or r["split"] == split)
+        and (seed is None or int(r["seed"]) == seed)
+        and (scene is None or scene in r["scene"])
+    ]
     if not recs:
         raise KeyError(
             f"episode {episode_id!r} is not in {run_dir}/episodes.jsonl (filters split={split}, seed={seed})"
@@ -190,8 +224,11 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
             f"episode {episode_id!r} exists in several (split, scene) pairs: {where}; pass --split and/or --scene"
         )
     rec = recs[0]
-    specs = [s for s in load_specs(meta["data"], meta["scenes"], rec["split"], None)
-             if s.episode_id == str(episode_id) and s.scene == rec["scene"]]
+    specs = [
+        s
+        for s in load_specs(meta["data"], meta["scenes"], rec["split"], None)
+        if s.episode_id == str(episode_id) and s.scene == rec["scene"]
+    ]
     if not specs:
         raise KeyError(f"episode {episode_id!r} of {rec['scene']} not found in {meta['data']}/{rec['split']}")
     spec = specs[0]
@@ -225,15 +262,23 @@ def render_video(run_dir: str | Path, episode_id: str, out: str | Path, split: s
     for t, a in enumerate(actions, 1):
         obs, _, term, trunc, info = env.step(a)
         path.append(info["privileged"].state.position)
-        frames.append(frame(obs, info, f"goal: {spec.goal_category}  step {t} {names[a]}  "
-                                       f"d={info['privileged'].distance_to_goal:.2f} m", t))
+        frames.append(
+            frame(
+                obs,
+                info,
+                f"goal: {spec.goal_category}  step {t} {names[a]}  d={info['privileged'].distance_to_goal:.2f} m",
+                t,
+            )
+        )
         if term or trunc:
             break
     env.close()
     if view is not None and view.diverged is not None:
-        warnings.warn(f"{meta['agent']} replayed through a fresh agent chose another action than the record after "
-                      f"step {view.diverged} (not deterministic given the episode seed?): its panel stops there",
-                      stacklevel=2)
+        warnings.warn(
+            f"{meta['agent']} replayed through a fresh agent chose another action than the record after "
+            f"step {view.diverged} (not deterministic given the episode seed?): its panel stops there",
+            stacklevel=2,
+        )
     verdict = "SUCCESS" if rec["success"] else f"FAIL: {rec['failure']}"
     last = frames[-1].copy()
     cv2.putText(last, verdict, (8, 60), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 0, 0), 2, cv2.LINE_AA)

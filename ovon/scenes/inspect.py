@@ -61,8 +61,11 @@ def print_summary(summary: dict[str, Any], console: Any = None, max_categories: 
     over.add_row("triangles", tri)
     over.add_row("textured", "yes" if summary["textured"] else "no")
     over.add_row("bounds", f"{summary['bounds_min']} .. {summary['bounds_max']}")
-    over.add_row("floors (y, m)", ", ".join(f"{h:.2f}" for h in summary["floors"])
-                 or "none found (no upward horizontal face: is the up axis right? see --up)")
+    over.add_row(
+        "floors (y, m)",
+        ", ".join(f"{h:.2f}" for h in summary["floors"])
+        or "none found (no upward horizontal face: is the up axis right? see --up)",
+    )
     over.add_row("annotations", summary["annotations"])
     over.add_row("rooms", str(len(summary["rooms"])))
     over.add_row(
@@ -75,10 +78,13 @@ def print_summary(summary: dict[str, Any], console: Any = None, max_categories: 
         top = ", ".join(f"{k} ({v})" for k, v in list(summary["dropped_labels"].items())[:8])
         over.add_row("dropped labels", top)
     for f in summary.get("navigation", []):
-        over.add_row(f"floor {f['floor']} navigable", f"{f['navigable_m2']:.1f} m² at y={f['height']:.2f} in "
-                     f"{f['islands']} islands; {f['start_area_m2']:.1f} m² on islands big enough for starts; "
-                     f"{f['narrow_removed_m2']:.1f} m² of strips too narrow to drive removed"
-                     + (f" (from {Path(f['source']).name})" if f.get("source", "mesh") != "mesh" else ""))
+        over.add_row(
+            f"floor {f['floor']} navigable",
+            f"{f['navigable_m2']:.1f} m² at y={f['height']:.2f} in "
+            f"{f['islands']} islands; {f['start_area_m2']:.1f} m² on islands big enough for starts; "
+            f"{f['narrow_removed_m2']:.1f} m² of strips too narrow to drive removed"
+            + (f" (from {Path(f['source']).name})" if f.get("source", "mesh") != "mesh" else ""),
+        )
     console.print(over)
 
     if summary["rooms"]:

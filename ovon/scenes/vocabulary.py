@@ -236,9 +236,7 @@ class Vocabulary:
 
     def for_room(self, room: str, placement: Placement | None = None) -> list[Category]:
         return [
-            c
-            for c in self.categories.values()
-            if room in c.rooms and (placement is None or c.placement == placement)
+            c for c in self.categories.values() if room in c.rooms and (placement is None or c.placement == placement)
         ]
 
     def clean(self, raw: str) -> str | None:
@@ -317,9 +315,18 @@ def parse_vocabulary(
         return tuple(normalize_label(str(w)) for w in map_doc.get(key, []))
 
     fixes, mpcat = habitat_table or ({}, {})
-    label_map = LabelMap(mapping, drop, str(map_doc.get("provenance", "")), fixes, mpcat,
-                         words("structural_words"), words("part_words"), words("vague"), words("room_prefixes"),
-                         words("fixtures"))
+    label_map = LabelMap(
+        mapping,
+        drop,
+        str(map_doc.get("provenance", "")),
+        fixes,
+        mpcat,
+        words("structural_words"),
+        words("part_words"),
+        words("vague"),
+        words("room_prefixes"),
+        words("fixtures"),
+    )
     vocab = Vocabulary(cats, label_map)
     if counts:
         vocab.categories = _real_frequencies(vocab, counts)
@@ -334,8 +341,13 @@ def load_vocabulary() -> Vocabulary:
     loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
     cats_doc = yaml.load((data / "vocabulary.yaml").read_text(), Loader=loader)  # noqa: S506 - a safe loader
     map_doc = yaml.load((data / "label_map.yaml").read_text(), Loader=loader)  # noqa: S506
-    return parse_vocabulary(cats_doc, map_doc, source="ovon/scenes/data/vocabulary.yaml",
-                            habitat_table=habitat_table(), counts=hm3dsem_counts())
+    return parse_vocabulary(
+        cats_doc,
+        map_doc,
+        source="ovon/scenes/data/vocabulary.yaml",
+        habitat_table=habitat_table(),
+        counts=hm3dsem_counts(),
+    )
 
 
 def habitat_table() -> tuple[dict[str, str], dict[str, str]]:

@@ -49,9 +49,7 @@ class Kinematics:
             return StepResult(s, False)
         if action in (LOOK_UP, LOOK_DOWN):
             delta = math.radians(cfg.look_angle_deg) * (1 if action == LOOK_UP else -1)
-            s.pitch = float(
-                np.clip(s.pitch + delta, math.radians(cfg.min_pitch_deg), math.radians(cfg.max_pitch_deg))
-            )
+            s.pitch = float(np.clip(s.pitch + delta, math.radians(cfg.min_pitch_deg), math.radians(cfg.max_pitch_deg)))
             return StepResult(s, False)
         if action in (TURN_LEFT, TURN_RIGHT):
             sign = 1.0 if action == TURN_LEFT else -1.0
@@ -84,8 +82,16 @@ class Kinematics:
     def _free_prefix(self, start: np.ndarray, dx: float, dz: float) -> tuple[np.ndarray, bool]:
         """Last navigable sample along the move and whether the whole move was free."""
         g = self.grid
-        k, n = free_prefix(self._navigable, float(g.origin[0]), float(g.origin[1]), float(g.cell_size),
-                           float(start[0]), float(start[2]), dx, dz)
+        k, n = free_prefix(
+            self._navigable,
+            float(g.origin[0]),
+            float(g.origin[1]),
+            float(g.cell_size),
+            float(start[0]),
+            float(start[2]),
+            dx,
+            dz,
+        )
         f = k / n
         return np.array([start[0] + dx * f, start[1], start[2] + dz * f], dtype=np.float64), k == n
 
@@ -93,8 +99,16 @@ class Kinematics:
         reached, free = self._free_prefix(start, dx, dz)
         if not free and self.cfg.allow_sliding:
             g = self.grid
-            px, pz = slide_point(self._navigable, float(g.origin[0]), float(g.origin[1]), float(g.cell_size),
-                                 float(start[0]), float(start[2]), dx, dz)
+            px, pz = slide_point(
+                self._navigable,
+                float(g.origin[0]),
+                float(g.origin[1]),
+                float(g.cell_size),
+                float(start[0]),
+                float(start[2]),
+                dx,
+                dz,
+            )
             reached = np.array([px, start[1], pz], dtype=np.float64)
         out = reached
         r, c = self.grid.world_to_cell(out)
@@ -136,9 +150,7 @@ class Odometry:
         d = state.position - self._start.position
         f = heading_vector(self._start.yaw)
         left = np.array([f[2], 0.0, -f[0]])
-        return np.array(
-            [float(d @ f), float(d @ left), wrap_angle(state.yaw - self._start.yaw)], dtype=np.float64
-        )
+        return np.array([float(d @ f), float(d @ left), wrap_angle(state.yaw - self._start.yaw)], dtype=np.float64)
 
     def update(self, state: AgentState, rng: np.random.Generator | None = None) -> np.ndarray:
         assert self._prev_true is not None

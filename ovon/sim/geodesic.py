@@ -320,7 +320,6 @@ class DistanceField:
             out = np.concatenate([out[:1], out[1:][seg > 1e-9]])
         return out
 
-
     def path_length(self, xyz) -> float:
         """Length of `path(xyz)` in 3D (y from the floor surface, as habitat measures its paths): the
         string-pulled shortest path, closer to habitat's geodesic distance than the field value
@@ -374,8 +373,19 @@ def _seed(grid: NavGrid, goals: np.ndarray, r0: int, c0: int, shape: tuple[int, 
     on the crop starting at (r0, c0)."""
     seed = np.full(shape, np.inf)
     rows, cols = grid.world_to_cell(goals)
-    _seed_kernel(seed, np.ascontiguousarray(goals[:, 0]), np.ascontiguousarray(goals[:, 2]), rows, cols,
-                 int(r0), int(c0), _SEED_RADIUS, float(grid.origin[0]), float(grid.origin[1]), float(grid.cell_size))
+    _seed_kernel(
+        seed,
+        np.ascontiguousarray(goals[:, 0]),
+        np.ascontiguousarray(goals[:, 2]),
+        rows,
+        cols,
+        int(r0),
+        int(c0),
+        _SEED_RADIUS,
+        float(grid.origin[0]),
+        float(grid.origin[1]),
+        float(grid.cell_size),
+    )
     return seed
 
 

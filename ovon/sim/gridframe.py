@@ -36,8 +36,10 @@ def grid_frame(V: np.ndarray, cs: float) -> tuple[np.ndarray, int, int]:
     lo = V[:, [0, 2]].min(axis=0)
     hi = V[:, [0, 2]].max(axis=0)
     if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
-        raise ValueError("the scene's vertices are not all finite (NaN or infinite): no navigation grid can span "
-                         "them; fix: repair the mesh")
+        raise ValueError(
+            "the scene's vertices are not all finite (NaN or infinite): no navigation grid can span "
+            "them; fix: repair the mesh"
+        )
     first = np.floor(lo / cs) - 1  # index (in multiples of cs) of the first cell centre
     last = np.ceil(hi / cs) + 1
     origin = (first - 0.5) * cs

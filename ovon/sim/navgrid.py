@@ -406,8 +406,10 @@ class SceneNav:
             return f"start {shown} is not on the navigable map (floor {grid.floor})"
         surface = float(grid.cell_to_world(*grid.world_to_cell(p))[1])
         if not abs(p[1] - surface) <= START_HEIGHT_TOLERANCE_M:
-            return (f"start {shown} is {p[1] - surface:+.2f} m from its floor's surface (y {surface:.3f} on floor "
-                    f"{grid.floor}; at most {START_HEIGHT_TOLERANCE_M} m)")
+            return (
+                f"start {shown} is {p[1] - surface:+.2f} m from its floor's surface (y {surface:.3f} on floor "
+                f"{grid.floor}; at most {START_HEIGHT_TOLERANCE_M} m)"
+            )
         return None
 
     def snap(self, xyz) -> np.ndarray:
@@ -521,23 +523,53 @@ def _drivable(free: np.ndarray, cs: float, agent: AgentConfig) -> tuple[np.ndarr
     return navigable, eroded & ~navigable
 
 
-def _grid(floor: int, height: float, origin: np.ndarray, cs: float, free: np.ndarray, heights: np.ndarray,
-          agent: AgentConfig) -> NavGrid:
+def _grid(
+    floor: int, height: float, origin: np.ndarray, cs: float, free: np.ndarray, heights: np.ndarray, agent: AgentConfig
+) -> NavGrid:
     navigable, narrow = _drivable(free, cs, agent)
     islands, area, radius = _islands(navigable, origin, cs)
-    return NavGrid(floor=floor, height=float(height), origin=origin.copy(), cell_size=cs, navigable=navigable,
-                   free=free, heights=heights, islands=islands, island_area=area, island_radius=radius,
-                   island_height=_island_heights(islands, heights, len(area)), narrow=narrow)
+    return NavGrid(
+        floor=floor,
+        height=float(height),
+        origin=origin.copy(),
+        cell_size=cs,
+        navigable=navigable,
+        free=free,
+        heights=heights,
+        islands=islands,
+        island_area=area,
+        island_radius=radius,
+        island_height=_island_heights(islands, heights, len(area)),
+        narrow=narrow,
+    )
 
 
-def _surface_grid(floor: int, height: float, origin: np.ndarray, cs: float, navigable: np.ndarray, free: np.ndarray,
-                 heights: np.ndarray) -> NavGrid:
+def _surface_grid(
+    floor: int,
+    height: float,
+    origin: np.ndarray,
+    cs: float,
+    navigable: np.ndarray,
+    free: np.ndarray,
+    heights: np.ndarray,
+) -> NavGrid:
     """A floor whose navigable cells are given as they are (a navmesh, eroded already: no second radius
     erosion and no drivable opening)."""
     islands, area, radius = _islands(navigable, origin, cs)
-    return NavGrid(floor=floor, height=float(height), origin=origin.copy(), cell_size=cs, navigable=navigable,
-                   free=free, heights=heights, islands=islands, island_area=area, island_radius=radius,
-                   island_height=_island_heights(islands, heights, len(area)), narrow=np.zeros_like(navigable))
+    return NavGrid(
+        floor=floor,
+        height=float(height),
+        origin=origin.copy(),
+        cell_size=cs,
+        navigable=navigable,
+        free=free,
+        heights=heights,
+        islands=islands,
+        island_area=area,
+        island_radius=radius,
+        island_height=_island_heights(islands, heights, len(area)),
+        narrow=np.zeros_like(navigable),
+    )
 
 
 def _make_grid(
@@ -637,8 +669,9 @@ def _load(path: Path, agent: AgentConfig) -> list[NavGrid] | None:
         return None
 
 
-def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavConfig | None = None,
-                     cache_dir: str | Path | None = None) -> SceneNav:
+def build_navigation(
+    scene: Scene, agent: AgentConfig | None = None, nav: NavConfig | None = None, cache_dir: str | Path | None = None
+) -> SceneNav:
     """Navigation grids of a scene, cached in-process by mesh content + params, and on disk in
     `cache_dir` (`nav_<key>.npz`) when given: `ovon dataset generate` passes `<out>/.cache/nav`, so its
     two phases and a resumed run compute each scene's grids once.
@@ -672,9 +705,14 @@ def build_navigation(scene: Scene, agent: AgentConfig | None = None, nav: NavCon
     return _CACHE.get(key, make)
 
 
-def navmesh_navigation(path: str | Path, agent: AgentConfig | None = None, nav: NavConfig | None = None,
-                       floor_heights: list[float] | None = None, bounds: tuple[np.ndarray, np.ndarray] | None = None,
-                       mesh_name: str = "") -> SceneNav:
+def navmesh_navigation(
+    path: str | Path,
+    agent: AgentConfig | None = None,
+    nav: NavConfig | None = None,
+    floor_heights: list[float] | None = None,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    mesh_name: str = "",
+) -> SceneNav:
     """Navigation grids read from a habitat navmesh (`ovon.sim.navmesh.raster`: eroded already, so no
     second radius erosion and no drivable opening), cached in-process by file content + params. With the
     scene's mesh `bounds`, a navmesh lying outside the mesh is refused."""
@@ -688,8 +726,9 @@ def navmesh_navigation(path: str | Path, agent: AgentConfig | None = None, nav: 
 
     def make() -> SceneNav:
         floors = floors_from_bytes(data, str(path), nav, floor_heights, agent.radius)
-        grids = [_surface_grid(f.floor, f.height, f.origin, f.cell_size, f.navigable, f.free, f.heights)
-                 for f in floors]
+        grids = [
+            _surface_grid(f.floor, f.height, f.origin, f.cell_size, f.navigable, f.free, f.heights) for f in floors
+        ]
         return SceneNav(floors=grids, agent=agent, nav=nav, key=key, source=str(path))
 
     hit = _CACHE.get((key, agent), make)

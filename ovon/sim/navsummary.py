@@ -11,8 +11,9 @@ from ovon.scenes.model import Scene
 from ovon.sim.navgrid import build_navigation
 
 
-def navigation_summary(scene: Scene, min_island_radius: float, agent: AgentConfig | None = None,
-                       nav: NavConfig | None = None) -> list[dict[str, Any]]:
+def navigation_summary(
+    scene: Scene, min_island_radius: float, agent: AgentConfig | None = None, nav: NavConfig | None = None
+) -> list[dict[str, Any]]:
     """Per floor: navigable area, islands, the area on islands of radius >= `min_island_radius` (where
     starts can be sampled: `ovon.config.dataset.StartConfig.min_island_radius`) and the strips removed
     as too narrow to drive."""

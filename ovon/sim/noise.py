@@ -32,7 +32,10 @@ class ControllerNoise:
 
 def _mn(t_mean, t_var, r_mean, r_var) -> MotionNoise:
     return MotionNoise(
-        tuple(t_mean), tuple(math.sqrt(v) for v in t_var), r_mean, math.sqrt(r_var)  # type: ignore[arg-type]
+        tuple(t_mean),
+        tuple(math.sqrt(v) for v in t_var),
+        r_mean,
+        math.sqrt(r_var),  # type: ignore[arg-type]
     )
 
 

@@ -45,8 +45,9 @@ class EpisodeSetup:
     point_goal: np.ndarray | None = None  # pointnav: the goal (forward, left) in the start frame
 
 
-def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig,
-                    fov_deg: float = 42.0) -> EpisodeSetup:
+def prepare_episode(
+    world: World, spec: EpisodeSpec, rng: np.random.Generator, task: TaskConfig, fov_deg: float = 42.0
+) -> EpisodeSetup:
     """Goal instances, viewpoints (the episode's own, or navigable points within 1 m of the goals for
     ad-hoc episodes), the goal distance field, and the start (the episode's, or a seeded random one
     connected to the goals). `fov_deg` is the camera's (for the exploration reward). Raises ValueError when
@@ -71,10 +72,12 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
         # viewpoint upstairs over a navigable cell downstairs would otherwise be a goal there.
         viewpoints = [v for v in spec.viewpoints if world.nav.floor_index(v.position) == grid.floor]
         if not viewpoints:
-            raise ValueError(f"episode {spec.episode_id!r} in scene {spec.scene!r}: no goal viewpoint on the start's "
-                             f"floor {grid.floor} ({len(spec.viewpoints)} on other floors); expected the goal on the "
-                             "start's floor (ovon navigates one floor at a time); fix: `ovon dataset validate` "
-                             "lists such episodes (other_floor): leave them out")
+            raise ValueError(
+                f"episode {spec.episode_id!r} in scene {spec.scene!r}: no goal viewpoint on the start's "
+                f"floor {grid.floor} ({len(spec.viewpoints)} on other floors); expected the goal on the "
+                "start's floor (ovon navigates one floor at a time); fix: `ovon dataset validate` "
+                "lists such episodes (other_floor): leave them out"
+            )
         points = np.stack([v.position for v in viewpoints])
     else:
         grid, points, viewpoints = _adhoc_viewpoints(world, grids, objs, spec.goal_category)
@@ -82,9 +85,11 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
     if start_pos is None:
         start_pos = _random_reachable_start(grid, field, rng, task.success_distance)
     elif not math.isfinite(field.distance(start_pos)):  # else the episode would run to its step limit first
-        raise ValueError(f"episode {spec.episode_id!r} in scene {spec.scene!r}: no goal viewpoint is reachable from "
-                         f"the start {np.round(start_pos, 3).tolist()} on floor {grid.floor}; fix: `ovon dataset "
-                         "validate` lists such episodes (unreachable): leave them out")
+        raise ValueError(
+            f"episode {spec.episode_id!r} in scene {spec.scene!r}: no goal viewpoint is reachable from "
+            f"the start {np.round(start_pos, 3).tolist()} on floor {grid.floor}; fix: `ovon dataset "
+            "validate` lists such episodes (unreachable): leave them out"
+        )
     yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
     goal_ids = frozenset(o.id for o in objs)
     on_floor = [o for o in objs if world.nav.grid_for(o.aabb_min) is grid] or objs
@@ -93,10 +98,14 @@ def prepare_episode(world: World, spec: EpisodeSpec, rng: np.random.Generator, t
         from ovon.task.coverage import Coverage
 
         coverage = Coverage(grid, task.reward.coverage_fov_deg or fov_deg, task.reward.coverage_range_m)
-    tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=goal_ids, cfg=task,
-                             distractors=_world_distractors(world, spec.goal_categories),
-                             coverage=coverage,
-                             object_distance_fn=lambda p: object_floor_distance(on_floor, p))
+    tracker = EpisodeTracker(
+        distance_fn=field.distance,
+        goal_ids=goal_ids,
+        cfg=task,
+        distractors=_world_distractors(world, spec.goal_categories),
+        coverage=coverage,
+        object_distance_fn=lambda p: object_floor_distance(on_floor, p),
+    )
     state = AgentState(np.array(start_pos, dtype=np.float64), float(yaw), 0.0)
     return EpisodeSetup(state, grid, field, list(viewpoints), goal_ids, tracker)
 
@@ -110,8 +119,10 @@ def check_start(world: World, spec: EpisodeSpec) -> np.ndarray | None:
     where = f"episode {spec.episode_id!r} in scene {spec.scene!r}"
     yaw = spec.start_yaw
     if yaw is not None and not (isinstance(yaw, int | float | np.integer | np.floating) and math.isfinite(yaw)):
-        raise ValueError(f"{where}: start yaw = {yaw!r}: expected a finite angle; fix: give a finite start yaw "
-                         "(ObjectNavEnv start=(x, y, z, yaw_deg)), or none for a random one")
+        raise ValueError(
+            f"{where}: start yaw = {yaw!r}: expected a finite angle; fix: give a finite start yaw "
+            "(ObjectNavEnv start=(x, y, z, yaw_deg)), or none for a random one"
+        )
     if spec.start_position is None:
         return None
     try:
@@ -119,8 +130,10 @@ def check_start(world: World, spec: EpisodeSpec) -> np.ndarray | None:
     except (TypeError, ValueError):
         pos = np.full(0, np.nan)
     if pos.shape != (3,) or not np.isfinite(pos).all():
-        raise ValueError(f"{where}: start (x, y, z) = {spec.start_position!r}: expected 3 finite numbers; fix: give "
-                         "a start on the scene's navigable floor, or none for a random one")
+        raise ValueError(
+            f"{where}: start (x, y, z) = {spec.start_position!r}: expected 3 finite numbers; fix: give "
+            "a start on the scene's navigable floor, or none for a random one"
+        )
     why = world.nav.start_problem(pos)
     if why is None:
         return pos
@@ -128,9 +141,11 @@ def check_start(world: World, spec: EpisodeSpec) -> np.ndarray | None:
         raise ValueError(f"{where}: {why}; fix: check the scene's mesh and the agent's size (sim.agent)")
     near = world.nav.snap(pos)  # nan when this floor has no navigable cell
     hint = f"e.g. the nearest navigable point {near.round(3).tolist()}" if np.isfinite(near).all() else "elsewhere"
-    raise ValueError(f"{where}: {why}; expected a navigable x, z (agent radius {world.nav.agent.radius} m) with y "
-                     f"within {START_HEIGHT_TOLERANCE_M} m of that floor's surface; fix: start there, {hint}, or give "
-                     "no start for a random one")
+    raise ValueError(
+        f"{where}: {why}; expected a navigable x, z (agent radius {world.nav.agent.radius} m) with y "
+        f"within {START_HEIGHT_TOLERANCE_M} m of that floor's surface; fix: start there, {hint}, or give "
+        "no start for a random one"
+    )
     return pos
 
 
@@ -147,6 +162,7 @@ def _adhoc_viewpoints(world: World, grids: list, objs: list, goal: str) -> tuple
     on the first of `grids` that has any. Cached per (grids, objects): a training env resets to the same
     few goal sets thousands of times, and building the ~1000 viewpoints cost more than the episode's
     first frame. The cached viewpoints are shared, read-only."""
+
     def make() -> tuple:
         grid, points = grids[0], np.zeros((0, 3))
         for grid in grids:
@@ -184,8 +200,10 @@ def _prepare_point(world: World, spec: EpisodeSpec, rng: np.random.Generator, ta
 
     start = check_start(world, spec)
     if start is not None and not spec.viewpoints:
-        raise ValueError(f"episode {spec.episode_id!r}: a PointNav episode with a given start needs its goal point "
-                         "too (viewpoints[0]); fix: give both, or neither for a sampled pair")
+        raise ValueError(
+            f"episode {spec.episode_id!r}: a PointNav episode with a given start needs its goal point "
+            "too (viewpoints[0]); fix: give both, or neither for a sampled pair"
+        )
     if start is not None:
         grid = world.nav.grid_for(start)
         goal = np.asarray(spec.viewpoints[0].position, dtype=np.float64)
@@ -195,5 +213,12 @@ def _prepare_point(world: World, spec: EpisodeSpec, rng: np.random.Generator, ta
     yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
     tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=frozenset(), cfg=task, goal_known=True)
     state = AgentState(np.array(start, dtype=np.float64), float(yaw), 0.0)
-    return EpisodeSetup(state, grid, field, [GoalViewpoint(np.asarray(goal, dtype=np.float64), 0.0)], frozenset(),
-                        tracker, goal_in_start_frame(start, yaw, goal))
+    return EpisodeSetup(
+        state,
+        grid,
+        field,
+        [GoalViewpoint(np.asarray(goal, dtype=np.float64), 0.0)],
+        frozenset(),
+        tracker,
+        goal_in_start_frame(start, yaw, goal),
+    )

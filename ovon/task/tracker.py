@@ -124,7 +124,11 @@ class EpisodeTracker:
             self.goal_view_max = max(self.goal_view_max, frac)
 
     def update(
-        self, position: np.ndarray, stop: bool, collided: bool, semantic: np.ndarray | None = None,
+        self,
+        position: np.ndarray,
+        stop: bool,
+        collided: bool,
+        semantic: np.ndarray | None = None,
         yaw: float | None = None,
     ) -> None:
         """Record one step: the action taken (STOP or not) and the resulting true pose."""
@@ -176,8 +180,13 @@ class EpisodeTracker:
             if not math.isfinite(delta):
                 delta = 0.0
             failed_stop = r.dense_failed_stop if (self.called_stop or self.stopped_outside) else 0.0
-            return (-delta + r.dense_slack + failed_stop + r.dense_coverage * self.new_area
-                    + r.dense_goal_view * self.goal_view_gain)
+            return (
+                -delta
+                + r.dense_slack
+                + failed_stop
+                + r.dense_coverage * self.new_area
+                + r.dense_goal_view * self.goal_view_gain
+            )
         if r.kind == "sparse":
             collision = r.sparse_collision if self.last_collided else 0.0
             return (r.sparse_success if self.success else 0.0) + r.sparse_slack + collision

@@ -41,24 +41,34 @@ def check_source(specs: object) -> None:
     if isinstance(specs, EpisodeSource):
         limit, task = specs.limit, specs.task
         if limit is not None and (not isinstance(limit, int) or isinstance(limit, bool) or limit <= 0):
-            raise ConfigError(f"EpisodeSource(limit={limit!r}): expected an integer > 0 (at most that many "
-                              "episodes) or None (all); fix: pass limit=N with N > 0, or leave it out")
+            raise ConfigError(
+                f"EpisodeSource(limit={limit!r}): expected an integer > 0 (at most that many "
+                "episodes) or None (all); fix: pass limit=N with N > 0, or leave it out"
+            )
         if task not in ("objectnav", "pointnav"):
-            raise ConfigError(f"EpisodeSource(task={task!r}): expected one of 'objectnav', 'pointnav'; fix: "
-                              "pass task='objectnav' (the default) or task='pointnav'")
+            raise ConfigError(
+                f"EpisodeSource(task={task!r}): expected one of 'objectnav', 'pointnav'; fix: "
+                "pass task='objectnav' (the default) or task='pointnav'"
+            )
         for key in ("data", "scenes", "procedural", "split"):
             value = getattr(specs, key)
             if value is not None and not isinstance(value, str | os.PathLike):
-                raise ConfigError(f"EpisodeSource({key}={value!r}): expected a string; fix: pass {key} as a "
-                                  "string (a path for data and scenes, seeds like '0-7' for procedural)")
+                raise ConfigError(
+                    f"EpisodeSource({key}={value!r}): expected a string; fix: pass {key} as a "
+                    "string (a path for data and scenes, seeds like '0-7' for procedural)"
+                )
         return
     if isinstance(specs, str | bytes | os.PathLike) or not isinstance(specs, Sequence):
-        raise ConfigError(f"train(specs={specs!r:.80}): expected a list of EpisodeSpec, an EpisodeSource or None; "
-                          "fix: pass EpisodeSource(data=ROOT, scenes=ROOT, split=NAME) for a dataset split")
+        raise ConfigError(
+            f"train(specs={specs!r:.80}): expected a list of EpisodeSpec, an EpisodeSource or None; "
+            "fix: pass EpisodeSource(data=ROOT, scenes=ROOT, split=NAME) for a dataset split"
+        )
     bad = next((i for i, s in enumerate(specs) if not isinstance(s, EpisodeSpec)), None)
     if bad is not None:
-        raise ConfigError(f"train(specs): item {bad} is a {type(specs[bad]).__name__}, not an EpisodeSpec; fix: "
-                          "pass a list of EpisodeSpec (ovon.task.episode) or an EpisodeSource")
+        raise ConfigError(
+            f"train(specs): item {bad} is a {type(specs[bad]).__name__}, not an EpisodeSpec; fix: "
+            "pass a list of EpisodeSpec (ovon.task.episode) or an EpisodeSource"
+        )
 
 
 def check_out_dir(out_dir: object) -> Path:
@@ -68,13 +78,20 @@ def check_out_dir(out_dir: object) -> Path:
     from ovon.config.base import ConfigError
 
     if not isinstance(out_dir, str | os.PathLike):
-        raise ConfigError(f"train(out_dir={out_dir!r:.80}): expected the path of a run folder (a str or a Path); "
-                          "fix: pass out_dir='runs/NAME'")
+        raise ConfigError(
+            f"train(out_dir={out_dir!r:.80}): expected the path of a run folder (a str or a Path); "
+            "fix: pass out_dir='runs/NAME'"
+        )
     return check_output_path(out_dir, "out_dir", folder=True, error=ConfigError)
 
 
-def train(cfg: TrainConfig, specs: Sequence[EpisodeSpec] | EpisodeSource | None, out_dir: str | Path,
-          resume: bool = False, init: str | None = None) -> dict:
+def train(
+    cfg: TrainConfig,
+    specs: Sequence[EpisodeSpec] | EpisodeSource | None,
+    out_dir: str | Path,
+    resume: bool = False,
+    init: str | None = None,
+) -> dict:
     """Run `cfg.algo` in the run folder `out_dir`; returns the last logged metrics (rank 0; {} elsewhere).
 
     `specs`: the episodes (a list, or an `EpisodeSource` naming a dataset split or procedural houses;
@@ -93,11 +110,15 @@ def train(cfg: TrainConfig, specs: Sequence[EpisodeSpec] | EpisodeSource | None,
     check_source(specs)
     check_out_dir(out_dir)
     if not isinstance(resume, bool):
-        raise ConfigError(f"train(resume={resume!r}): expected True or False; fix: pass resume=True to continue "
-                          "the run in out_dir, else leave it out")
+        raise ConfigError(
+            f"train(resume={resume!r}): expected True or False; fix: pass resume=True to continue "
+            "the run in out_dir, else leave it out"
+        )
     if init is not None and not isinstance(init, str | os.PathLike):
-        raise ConfigError(f"train(init={init!r:.80}): expected the path of a policy.pt (or of its run folder) or "
-                          "None; fix: pass init='runs/NAME/policy.pt'")
+        raise ConfigError(
+            f"train(init={init!r:.80}): expected the path of a policy.pt (or of its run folder) or "
+            "None; fix: pass init='runs/NAME/policy.pt'"
+        )
     episodes, config_keys, inputs = resolve_episodes(specs)
     if cfg.algo not in ("bc", "dagger", "ppo"):
         raise ValueError(f"unknown algorithm {cfg.algo!r}; valid: bc, dagger, ppo")
@@ -115,8 +136,9 @@ def train(cfg: TrainConfig, specs: Sequence[EpisodeSpec] | EpisodeSource | None,
             folder.close()
 
 
-def _run(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | Path, resume: bool,
-         init: str | None) -> dict:
+def _run(
+    cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | Path, resume: bool, init: str | None
+) -> dict:
     if cfg.algo == "bc":
         from ovon.train.bc import train_bc
 

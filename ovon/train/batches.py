@@ -21,7 +21,7 @@ def features(policy, images: Images) -> torch.Tensor:
         return images if images.dtype in NARROW_FLOATS else images.float()
     rgb = images["rgb"]
     lead = rgb.shape[:-3]
-    flat = {k: v.reshape(-1, *v.shape[len(lead):]) for k, v in images.items()}
+    flat = {k: v.reshape(-1, *v.shape[len(lead) :]) for k, v in images.items()}
     return policy.encode_images(flat).reshape(*lead, -1)
 
 
@@ -50,8 +50,9 @@ def imitation_loss(logits: torch.Tensor, target: torch.Tensor, stop_weight: floa
     if stop_weight != 1.0:
         weight = torch.ones(logits.shape[-1], dtype=logits.dtype, device=logits.device)
         weight[0] = stop_weight
-    return torch.nn.functional.cross_entropy(logits.reshape(-1, logits.shape[-1]), target.reshape(-1),
-                                             weight=weight, ignore_index=-1)
+    return torch.nn.functional.cross_entropy(
+        logits.reshape(-1, logits.shape[-1]), target.reshape(-1), weight=weight, ignore_index=-1
+    )
 
 
 def episode_summary(metrics: list[dict]) -> dict[str, float | None]:

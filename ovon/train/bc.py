@@ -44,10 +44,19 @@ def _record_job(job: dict) -> dict:
     path = Path(job["path"])
     if path.exists():
         return {"path": str(path), "episodes": -1}
-    env = build_env(EnvRecipe(sim=job["sim"], task=job["task"], encoder=job["encoder"], text_table=job["table"],
-                              expert=job["expert"], expert_cfg=job.get("expert_cfg"),
-                              expert_viewpoint_radius=job.get("expert_viewpoint_radius", 0.0),
-                              episodes=job["specs"][:1], sample_episodes=False))
+    env = build_env(
+        EnvRecipe(
+            sim=job["sim"],
+            task=job["task"],
+            encoder=job["encoder"],
+            text_table=job["table"],
+            expert=job["expert"],
+            expert_cfg=job.get("expert_cfg"),
+            expert_viewpoint_radius=job.get("expert_viewpoint_radius", 0.0),
+            episodes=job["specs"][:1],
+            sample_episodes=False,
+        )
+    )
     cnn = job["encoder"].image == "cnn"
     images: list[Any] = []
     prev, act, ep_of, lengths, goals, goal_text, metrics = [], [], [], [], [], [], []
@@ -95,12 +104,23 @@ def _record_job(job: dict) -> dict:
     else:
         shard["image"] = torch.from_numpy(np.stack(images).astype(np.float16))
     atomic_torch_save(shard, path)
-    return {"path": str(path), "episodes": len(lengths), "steps": len(act),
-            "success": float(np.mean([m["success"] for m in metrics]))}
+    return {
+        "path": str(path),
+        "episodes": len(lengths),
+        "steps": len(act),
+        "success": float(np.mean([m["success"] for m in metrics])),
+    }
 
 
-def record_shards(cfg: TrainConfig, specs: list[EpisodeSpec], shard_dir: str | Path, table: dict,
-                  episodes: int | None = None, workers: int | None = None, progress: bool = False) -> list[dict]:
+def record_shards(
+    cfg: TrainConfig,
+    specs: list[EpisodeSpec],
+    shard_dir: str | Path,
+    table: dict,
+    episodes: int | None = None,
+    workers: int | None = None,
+    progress: bool = False,
+) -> list[dict]:
     """Record `episodes` expert episodes (specs cycled, seeded) into shards of `bc.episodes_per_shard`,
     grouped by scene (one world load per shard). Existing shards are kept (resumable)."""
     from ovon.parallel import progress_bar, run_jobs
@@ -122,10 +142,21 @@ def record_shards(cfg: TrainConfig, specs: list[EpisodeSpec], shard_dir: str | P
             part = its[i : i + cfg.bc.episodes_per_shard]
             idx = sorted({p[0] for p in part})
             remap = {old: new for new, old in enumerate(idx)}
-            jobs.append({"path": str(shard_dir / f"shard_{len(jobs):05d}.pt"), "specs": [specs[j] for j in idx],
-                         "items": [(remap[a], s) for a, s in part], "sim": cfg.sim, "task": reward_for(cfg, False),
-                         "encoder": cfg.encoder, "table": tab, "expert": cfg.expert, "seed": cfg.seed + len(jobs),
-                         "expert_cfg": expert_config(cfg), "expert_viewpoint_radius": cfg.expert_viewpoint_radius_m})
+            jobs.append(
+                {
+                    "path": str(shard_dir / f"shard_{len(jobs):05d}.pt"),
+                    "specs": [specs[j] for j in idx],
+                    "items": [(remap[a], s) for a, s in part],
+                    "sim": cfg.sim,
+                    "task": reward_for(cfg, False),
+                    "encoder": cfg.encoder,
+                    "table": tab,
+                    "expert": cfg.expert,
+                    "seed": cfg.seed + len(jobs),
+                    "expert_cfg": expert_config(cfg),
+                    "expert_viewpoint_radius": cfg.expert_viewpoint_radius_m,
+                }
+            )
     results = []
     with progress_bar("recording expert shards", len(jobs), progress) as bar:
         for r in run_jobs(_record_job, jobs, workers=cfg.bc.record_workers if workers is None else workers):
@@ -172,9 +203,16 @@ def load_shards(shard_dir: str | Path, context: int) -> ChunkData:
     start = torch.zeros(len(episode), dtype=torch.bool)
     start[first] = True
     chunks = [(int(f) + a, min(context, int(n) - a)) for f, n in zip(first, lengths) for a in range(0, int(n), context)]
-    return ChunkData(image, torch.cat([s["goal"] for s in parts]), episode,
-                     torch.cat([s["prev_action"] for s in parts]), torch.cat([s["action"] for s in parts]),
-                     start, torch.tensor(chunks, dtype=torch.long).reshape(-1, 2), parts[0].get("meta", {}))
+    return ChunkData(
+        image,
+        torch.cat([s["goal"] for s in parts]),
+        episode,
+        torch.cat([s["prev_action"] for s in parts]),
+        torch.cat([s["action"] for s in parts]),
+        start,
+        torch.tensor(chunks, dtype=torch.long).reshape(-1, 2),
+        parts[0].get("meta", {}),
+    )
 
 
 def make_batch(data: ChunkData, chunk_ids: torch.Tensor, device: torch.device) -> dict[str, Any]:
@@ -188,8 +226,14 @@ def make_batch(data: ChunkData, chunk_ids: torch.Tensor, device: torch.device) -
         image: Any = data.image[idx].to(device).float()
     else:
         image = {k: v[idx].to(device) for k, v in data.image.items()}
-    return {"image": image, "goal": data.goal[data.episode[idx]].to(device), "prev": data.prev_action[idx].to(device),
-            "starts": data.start[idx].to(device), "action": data.action[idx].to(device), "mask": mask.to(device)}
+    return {
+        "image": image,
+        "goal": data.goal[data.episode[idx]].to(device),
+        "prev": data.prev_action[idx].to(device),
+        "starts": data.start[idx].to(device),
+        "action": data.action[idx].to(device),
+        "mask": mask.to(device),
+    }
 
 
 def epoch_permutation(n: int, seed: int, epoch: int) -> torch.Tensor:
@@ -198,8 +242,13 @@ def epoch_permutation(n: int, seed: int, epoch: int) -> torch.Tensor:
 
 
 # ----- training -----------------------------------------------------------------------------------
-def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | Path, resume: bool = False,
-             init: str | None = None) -> dict:
+def train_bc(
+    cfg: TrainConfig,
+    specs: list[EpisodeSpec] | None,
+    out_dir: str | Path,
+    resume: bool = False,
+    init: str | None = None,
+) -> dict:
     """Record shards if missing (needs `specs`), then train; returns the last logged metrics."""
     run = TrainRun(cfg, out_dir, "bc", init=init, resume=resume)
     cfg, dev, info = run.cfg, run.device, run.info
@@ -247,8 +296,9 @@ def train_bc(cfg: TrainConfig, specs: list[EpisodeSpec] | None, out_dir: str | P
             optimizer.step()
             run.step += int(m.sum()) * W
             acc = (logits[m].argmax(-1) == b["action"][m]).float().mean()
-            scalars = dist.all_reduce_mean({"loss": loss.item(), "accuracy": acc.item(),
-                                            "grad_norm": float(grad_norm)}, info)
+            scalars = dist.all_reduce_mean(
+                {"loss": loss.item(), "accuracy": acc.item(), "grad_norm": float(grad_norm)}, info
+            )
             if run.due(update + 1, total, cfg.log_every):
                 last = {**scalars, "epoch": float(epoch), "time/update_s": time.perf_counter() - t0}
                 run.log(update + 1, last)

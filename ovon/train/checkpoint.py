@@ -48,8 +48,9 @@ def to_device(obj: Any, device: str | torch.device) -> Any:
     if isinstance(obj, torch.Tensor):
         return obj.to(device)
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return dataclasses.replace(obj, **{f.name: to_device(getattr(obj, f.name), device)
-                                           for f in dataclasses.fields(obj) if f.init})
+        return dataclasses.replace(
+            obj, **{f.name: to_device(getattr(obj, f.name), device) for f in dataclasses.fields(obj) if f.init}
+        )
     if isinstance(obj, tuple):
         items = [to_device(x, device) for x in obj]
         return type(obj)(*items) if hasattr(obj, "_fields") else tuple(items)
@@ -91,8 +92,10 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
         ckpt = torch.load(path, map_location=map_location, weights_only=False)
     except Exception as e:  # noqa: BLE001 - torch raises many types for a torn or foreign file
         detail = " ".join(str(e).split())[:100]
-        raise ValueError(f"{path} is not a readable training checkpoint ({type(e).__name__}: {detail}); fix: restore "
-                         "it, or delete it (and policy.pt) to start the run over") from None
+        raise ValueError(
+            f"{path} is not a readable training checkpoint ({type(e).__name__}: {detail}); fix: restore "
+            "it, or delete it (and policy.pt) to start the run over"
+        ) from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path} is not an ovon training checkpoint ({FORMAT})")
     return ckpt

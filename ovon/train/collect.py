@@ -66,8 +66,12 @@ class RolloutCollector:
     # -- resume ---------------------------------------------------------------------------------
     def state(self) -> dict:
         """What a checkpoint needs to continue acting exactly."""
-        return {"env": self.envs.get_state(), "act_state": self.act_state, "prev_action": self.prev_action.cpu(),
-                "tail": self.tail}
+        return {
+            "env": self.envs.get_state(),
+            "act_state": self.act_state,
+            "prev_action": self.prev_action.cpu(),
+            "tail": self.tail,
+        }
 
     def restore(self, saved: dict) -> None:
         self.act_state = to_device(saved["act_state"], self.device)
@@ -107,14 +111,25 @@ class RolloutCollector:
             dones.append(self.batch.done)
             self.prev_action = torch.where(self.batch.first.to(dev), torch.full_like(action, -1), action)
             finished += self.batch.metrics
-        obs = {"images": stack_images(images, 1), "goals": torch.stack(goals, 1), "prevs": torch.stack(prevs, 1),
-               "starts": torch.stack(starts, 1)}
+        obs = {
+            "images": stack_images(images, 1),
+            "goals": torch.stack(goals, 1),
+            "prevs": torch.stack(prevs, 1),
+            "starts": torch.stack(starts, 1),
+        }
         if self.prefix > 0:
             obs = self._with_prefix(obs, steps)
-        return Rollout(**obs, labels=torch.stack(labels, 1), actions=torch.stack(actions, 1),
-                       behaviour_logp=torch.stack(logps, 1) if logps else None, rewards=torch.stack(rewards, 1),
-                       dones=torch.stack(dones, 1), state0=state0, finished=finished,
-                       prefix=self.prefix)
+        return Rollout(
+            **obs,
+            labels=torch.stack(labels, 1),
+            actions=torch.stack(actions, 1),
+            behaviour_logp=torch.stack(logps, 1) if logps else None,
+            rewards=torch.stack(rewards, 1),
+            dones=torch.stack(dones, 1),
+            state0=state0,
+            finished=finished,
+            prefix=self.prefix,
+        )
 
     def _with_prefix(self, obs: dict, steps: int) -> dict:
         """Prepend the stored tail (before the first rollout: padding marked as episode starts, which
@@ -156,8 +171,9 @@ def _clone_state(state):
 
 
 # -- returns -----------------------------------------------------------------------------------------
-def gae(rewards: torch.Tensor, values: torch.Tensor, dones: torch.Tensor, gamma: float,
-        lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+def gae(
+    rewards: torch.Tensor, values: torch.Tensor, dones: torch.Tensor, gamma: float, lam: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Generalised advantage estimation over (N, T) rewards / dones and (N, T + 1) values (the last
     column bootstraps). A done step does not look past its episode's end. Returns (advantages, returns)."""
     done = dones.float()

@@ -82,8 +82,10 @@ class FinetuneConfig:
     # advantages that are nearly noise. separate: the critic is its own copy of the initial network (core +
     # fresh value head), every weight of it at the critic lr; the actor's weights get no value gradient.
     critic: Literal["shared", "separate"] = "shared"
-    rules: ClassVar = (less("critic_decay_start", "critic_decay_end", strict=False),
-                       less("actor_unfreeze", "actor_warmup_end", strict=False))
+    rules: ClassVar = (
+        less("critic_decay_start", "critic_decay_end", strict=False),
+        less("actor_unfreeze", "actor_warmup_end", strict=False),
+    )
 
 
 @dataclass(frozen=True)
@@ -194,15 +196,26 @@ class TrainConfig:
     progress: bool = True
     rules: ClassVar = (
         # a PPO minibatch holds whole envs; BC and DAgger never read `ppo`
-        rule(("algo", "ppo.minibatches", "num_envs"), lambda a, m, n: a != "ppo" or m <= n,
-             "ppo.minibatches <= num_envs for algo ppo"),
-        rule(("learn_dtype", "algo"), lambda d, a: d == "float32" or a != "ppo",
-             "learn_dtype float32 for algo ppo (its ratio compares the update's log-probs with acting's)"),
-        rule(("task.kind", "algo"), lambda k, a: k != "pointnav" or a == "ppo",
-             "algo ppo for task.kind pointnav (there is no PointNav expert)"),
-        rule(("task.kind", "encoder.image", "policy.goal_similarity"),
-             lambda k, i, g: k != "pointnav" or (i == "depth-grid" and not g),
-             "encoder.image depth-grid and policy.goal_similarity false for task.kind pointnav"),
+        rule(
+            ("algo", "ppo.minibatches", "num_envs"),
+            lambda a, m, n: a != "ppo" or m <= n,
+            "ppo.minibatches <= num_envs for algo ppo",
+        ),
+        rule(
+            ("learn_dtype", "algo"),
+            lambda d, a: d == "float32" or a != "ppo",
+            "learn_dtype float32 for algo ppo (its ratio compares the update's log-probs with acting's)",
+        ),
+        rule(
+            ("task.kind", "algo"),
+            lambda k, a: k != "pointnav" or a == "ppo",
+            "algo ppo for task.kind pointnav (there is no PointNav expert)",
+        ),
+        rule(
+            ("task.kind", "encoder.image", "policy.goal_similarity"),
+            lambda k, i, g: k != "pointnav" or (i == "depth-grid" and not g),
+            "encoder.image depth-grid and policy.goal_similarity false for task.kind pointnav",
+        ),
     )
 
 
@@ -215,10 +228,17 @@ def _cpu_small() -> TrainConfig:
     run without it failed (see the README, "Learned baselines")."""
     return TrainConfig(
         # No previous-action input: with this little data the policy copies its last action (copycat).
-        policy=PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=0,
-                            goal_similarity=True),
-        encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=2, oracle_global=True,
-                              oracle_depth_grid=(6, 4), oracle_collision=True),
+        policy=PolicyConfig(
+            hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=0, goal_similarity=True
+        ),
+        encoder=EncoderConfig(
+            image="oracle-vl",
+            text="minilm-text",
+            oracle_grid=2,
+            oracle_global=True,
+            oracle_depth_grid=(6, 4),
+            oracle_collision=True,
+        ),
         # Portrait like the Stretch camera (paper: 360x640, 42 deg HFOV): a landscape frame hides the floor
         # and low furniture in front of the agent.
         sim=SimConfig(camera=CameraConfig(width=72, height=128)),
@@ -241,8 +261,9 @@ def _cpu_small() -> TrainConfig:
         # never visits the states where the expert says "forward" or STOP. The buffer keeps the last 300
         # labelled rollouts (150k steps, float16): with a short buffer the expert-driven states are
         # forgotten as soon as beta reaches 0 and the student collapses to turning in place.
-        dagger=DaggerConfig(beta_start=1.0, beta_end=0.0, beta_updates=200, buffer_rollouts=300, grad_steps=8,
-                            sample_rollouts=4),
+        dagger=DaggerConfig(
+            beta_start=1.0, beta_end=0.0, beta_updates=200, buffer_rollouts=300, grad_steps=8, sample_rollouts=4
+        ),
         checkpoint_every=50,
         # One learner thread: on 2 cores a second torch thread only helps while nothing else runs, and
         # an idle multi-threaded pool spinning next to the env workers slows everything 3-4x.
@@ -287,26 +308,56 @@ def _pointnav(scale: str) -> TrainConfig:
     # 33 -> 6 steps within 10 updates), since a STOP ends the slack and the random walk's distance losses.
     task = pointnav_task()
     encoder = EncoderConfig(image="depth-grid", oracle_depth_grid=(8, 4), oracle_collision=True)
-    policy = PolicyConfig(hidden=128, layers=2, heads=4, mlp=256, context=32, prev_action_dim=16, num_actions=4,
-                          stop_bias=-3.0)
+    policy = PolicyConfig(
+        hidden=128, layers=2, heads=4, mlp=256, context=32, prev_action_dim=16, num_actions=4, stop_bias=-3.0
+    )
     sim = SimConfig(camera=CameraConfig(width=72, height=128, rgb=False))
     # DD-PPO's PointNav values (2 epochs, grad norm 0.2). With 4 epochs and grad norm 0.5 a run reached 82%
     # SR on its training episodes at 340k steps, then entropy fell to 0.1, approx_kl spiked to 1e4 and SR
     # fell to 45% within 100k steps.
     ppo = PPOConfig(epochs=2, minibatches=2)
     if scale == "tiny":
-        return dataclasses.replace(base, algo="ppo", task=dataclasses.replace(task, max_steps=30), encoder=encoder,
-                                   policy=dataclasses.replace(policy, hidden=32, heads=2, mlp=64, context=16),
-                                   sim=SimConfig(camera=CameraConfig(width=36, height=64, rgb=False)),
-                                   ppo=PPOConfig(epochs=1, minibatches=2))
+        return dataclasses.replace(
+            base,
+            algo="ppo",
+            task=dataclasses.replace(task, max_steps=30),
+            encoder=encoder,
+            policy=dataclasses.replace(policy, hidden=32, heads=2, mlp=64, context=16),
+            sim=SimConfig(camera=CameraConfig(width=36, height=64, rgb=False)),
+            ppo=PPOConfig(epochs=1, minibatches=2),
+        )
     if scale == "paper":
-        return dataclasses.replace(base, algo="ppo", task=task, encoder=encoder, policy=policy, lr=2.5e-4, ppo=ppo,
-                                   rollout_steps=128, total_steps=100_000_000)
+        return dataclasses.replace(
+            base,
+            algo="ppo",
+            task=task,
+            encoder=encoder,
+            policy=policy,
+            lr=2.5e-4,
+            ppo=ppo,
+            rollout_steps=128,
+            total_steps=100_000_000,
+        )
     return dataclasses.replace(
-        base, algo="ppo", task=task, encoder=encoder, policy=policy, sim=sim, ppo=ppo,
-        num_envs=16, env_workers=2, rollout_steps=64, scene_repeat=64,
-        total_steps=5_000_000, max_updates=0, lr=2.5e-4, max_grad_norm=0.2, threads=1, checkpoint_every=20,
-        keep_checkpoints=3)
+        base,
+        algo="ppo",
+        task=task,
+        encoder=encoder,
+        policy=policy,
+        sim=sim,
+        ppo=ppo,
+        num_envs=16,
+        env_workers=2,
+        rollout_steps=64,
+        scene_repeat=64,
+        total_steps=5_000_000,
+        max_updates=0,
+        lr=2.5e-4,
+        max_grad_norm=0.2,
+        threads=1,
+        checkpoint_every=20,
+        keep_checkpoints=3,
+    )
 
 
 PRESETS = {"paper": _paper, "cpu-small": _cpu_small, "tiny": _tiny}

@@ -36,8 +36,9 @@ def beta_at(cfg: TrainConfig, update: int) -> float:
     return d.beta_start + f * (d.beta_end - d.beta_start)
 
 
-def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
-                 init: str | None = None) -> dict:
+def train_dagger(
+    cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False, init: str | None = None
+) -> dict:
     """Run DAgger; returns the last logged metrics. `init` starts from an IL/RL `policy.pt`."""
     run = TrainRun(cfg, out_dir, "dagger", init=init, resume=resume)
     cfg, dev = run.cfg, run.device
@@ -88,8 +89,12 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 state0 = start_states(policy, parts, dev) if keep_state else None
                 with run.learning():
                     obs = policy.make_obs(features(policy, img), torch.cat([q["goals"] for q in seqs]).to(dev))
-                    logits, values = model(obs, torch.cat([q["prevs"] for q in seqs]).to(dev),
-                                           torch.cat([q["starts"] for q in seqs]).to(dev), state0)
+                    logits, values = model(
+                        obs,
+                        torch.cat([q["prevs"] for q in seqs]).to(dev),
+                        torch.cat([q["starts"] for q in seqs]).to(dev),
+                        state0,
+                    )
                 logits, values = logits[:, P:].float(), values[:, P:].float()  # no loss on the context
                 target = torch.cat([p[4] for p in parts]).to(dev)
                 if g == 0:  # rows 0..num_envs: the newest rollout
@@ -106,9 +111,13 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
                 optimizer.step()
                 losses.append(loss.item())
                 accs.append((logits[valid].argmax(-1) == target[valid]).float().mean().item())
-            return {"loss": float(np.mean(losses)), "accuracy": float(np.mean(accs)), "grad_norm": grad_norm,
-                    "behaviour_kl": behaviour_kl,
-                    "time/learn_s": time.perf_counter() - t}
+            return {
+                "loss": float(np.mean(losses)),
+                "accuracy": float(np.mean(accs)),
+                "grad_norm": grad_norm,
+                "behaviour_kl": behaviour_kl,
+                "time/learn_s": time.perf_counter() - t,
+            }
 
         last: dict = {}
         pending = None  # overlap: (update, future of its learning, its rollout record)
@@ -119,8 +128,12 @@ def train_dagger(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path
             scalars = dist.all_reduce_mean({**learned, "time/rollout_s": record["rollout_s"]}, run.info)
             eps = [m for part in dist.gather_objects(record["finished"], run.info) for m in part]
             if run.due(u + 1, total, cfg.log_every):
-                last = {**scalars, **episode_summary(eps), "beta": record["beta"],
-                        "steps_per_s": n_envs * T * run.info.world_size / max(record["wall_s"], 1e-9)}
+                last = {
+                    **scalars,
+                    **episode_summary(eps),
+                    "beta": record["beta"],
+                    "steps_per_s": n_envs * T * run.info.world_size / max(record["wall_s"], 1e-9),
+                }
                 run.log(u + 1, last, step=record["step"])
 
         t_prev = time.perf_counter()
@@ -195,8 +208,7 @@ def buffer_entry(ro, previous: tuple | None, prefix: int, keep_state: bool) -> t
     context: list[dict] = []
     if prefix > 0 and previous is not None:
         context = last_steps([*_context_of(previous), _chunk_of(previous)], prefix)
-    return (_compact(ro.images), ro.goals, ro.prevs, ro.starts, ro.labels, context,
-            ro.state0 if keep_state else None)
+    return (_compact(ro.images), ro.goals, ro.prevs, ro.starts, ro.labels, context, ro.state0 if keep_state else None)
 
 
 def _chunk_of(entry: tuple) -> dict:
@@ -238,8 +250,7 @@ def with_context(entry: tuple, prefix: int) -> dict:
 
 def start_states(policy, entries: list[tuple], dev) -> tuple:
     """The LSTM (h, c) of the entries' chunks at their starts, joined over envs (zeros where none was kept)."""
-    states = [e[6] if len(e) > 6 and e[6] is not None else policy.init_state(e[1].shape[0], "cpu")
-              for e in entries]
+    states = [e[6] if len(e) > 6 and e[6] is not None else policy.init_state(e[1].shape[0], "cpu") for e in entries]
     return tuple(torch.cat([s[j].to(dev) for s in states], 1) for j in range(2))
 
 

@@ -56,12 +56,16 @@ def resolve_device(pref: str, local_rank: int = 0) -> torch.device:
     if dev.type == "cuda":
         n = torch.cuda.device_count() if torch.cuda.is_available() else 0
         if n == 0:
-            raise ConfigError(f"device = {pref}: CUDA sees no GPU on this machine; fix: --set device=auto "
-                              "(the GPU where there is one, else the CPU) or --set device=cpu")
+            raise ConfigError(
+                f"device = {pref}: CUDA sees no GPU on this machine; fix: --set device=auto "
+                "(the GPU where there is one, else the CPU) or --set device=cpu"
+            )
         if dev.index >= n:
-            raise ConfigError(f"device = {pref}: this process (local rank {local_rank}) needs cuda:{dev.index} "
-                              f"but CUDA sees {n} GPU(s); fix: start at most {n} processes per node "
-                              f"(torchrun --nproc_per_node {n}), or train on the CPU with --set device=cpu")
+            raise ConfigError(
+                f"device = {pref}: this process (local rank {local_rank}) needs cuda:{dev.index} "
+                f"but CUDA sees {n} GPU(s); fix: start at most {n} processes per node "
+                f"(torchrun --nproc_per_node {n}), or train on the CPU with --set device=cpu"
+            )
     return dev
 
 

@@ -67,8 +67,9 @@ def _metrics(infos: dict, n: int) -> list[dict]:
 class TrainEnvs:
     """`num_envs` training envs on `workers` processes (0 = in this process), seeded by `base_seed`."""
 
-    def __init__(self, recipe: EnvRecipe, specs: list[EpisodeSpec], num_envs: int, workers: int,
-                 base_seed: int) -> None:
+    def __init__(
+        self, recipe: EnvRecipe, specs: list[EpisodeSpec], num_envs: int, workers: int, base_seed: int
+    ) -> None:
         import dataclasses
 
         self.num_envs = num_envs
@@ -82,9 +83,15 @@ class TrainEnvs:
         else:
             image = torch.from_numpy(obs[IMAGE])
         label = torch.from_numpy(obs[LABEL]).long() if LABEL in obs else torch.full((self.num_envs,), -1)
-        return Batch(image=image, goal=torch.from_numpy(obs[GOAL]), label=label,
-                     reward=torch.as_tensor(reward, dtype=torch.float32), done=torch.as_tensor(done),
-                     first=torch.as_tensor(first), metrics=_metrics(infos, self.num_envs))
+        return Batch(
+            image=image,
+            goal=torch.from_numpy(obs[GOAL]),
+            label=label,
+            reward=torch.as_tensor(reward, dtype=torch.float32),
+            done=torch.as_tensor(done),
+            first=torch.as_tensor(first),
+            metrics=_metrics(infos, self.num_envs),
+        )
 
     def _start(self, obs: dict, infos: dict) -> Batch:
         n = self.num_envs

@@ -7,8 +7,9 @@ from collections.abc import Sequence
 from ovon.task.episode import EpisodeSpec
 
 
-def adhoc_specs(scene_seeds: Sequence[int], categories: Sequence[str] | None = None,
-                per_scene: int = 0) -> list[EpisodeSpec]:
+def adhoc_specs(
+    scene_seeds: Sequence[int], categories: Sequence[str] | None = None, per_scene: int = 0
+) -> list[EpisodeSpec]:
     """One episode per (procedural house, goal category), random starts.
 
     `categories` restricts the goals; `per_scene` > 0 keeps that many categories per house."""
@@ -21,8 +22,8 @@ def adhoc_specs(scene_seeds: Sequence[int], categories: Sequence[str] | None = N
             cats = [c for c in cats if c in set(categories)]
         if per_scene > 0:
             cats = cats[:per_scene]
-        specs += [EpisodeSpec(episode_id=f"adhoc-{seed}-{c}", scene=f"procedural:{seed}", goal_category=c,
-                              split="train") for c in cats]
+        specs += [
+            EpisodeSpec(episode_id=f"adhoc-{seed}-{c}", scene=f"procedural:{seed}", goal_category=c, split="train")
+            for c in cats
+        ]
     return specs
-
-

@@ -29,9 +29,21 @@ from ovon.train.config import TrainConfig
 
 # May differ between a run and its resume: where and how fast it runs, and the budget (to train longer),
 # not what it learns from or how.
-MAY_CHANGE = ("max_updates", "total_steps", "env_workers", "checkpoint_every", "threads", "rollout_threads",
-              "device", "progress", "log_every", "keep_checkpoints", "text_cache", "inputs.data.path",
-              "inputs.scenes.path")
+MAY_CHANGE = (
+    "max_updates",
+    "total_steps",
+    "env_workers",
+    "checkpoint_every",
+    "threads",
+    "rollout_threads",
+    "device",
+    "progress",
+    "log_every",
+    "keep_checkpoints",
+    "text_cache",
+    "inputs.data.path",
+    "inputs.scenes.path",
+)
 KIND = "train"
 MARKERS = ("checkpoint.pt", "policy.pt")  # run data written before identities existed
 
@@ -54,8 +66,10 @@ class EpisodeSource:
         """The episodes (None without `data` or `procedural`: BC from recorded shards)."""
         if self.task == "pointnav":
             if not self.procedural or self.data:
-                raise ValueError("--task pointnav samples its episodes in procedural houses: pass --procedural "
-                                 "SEEDS (e.g. 0-23) and no --data")
+                raise ValueError(
+                    "--task pointnav samples its episodes in procedural houses: pass --procedural "
+                    "SEEDS (e.g. 0-23) and no --data"
+                )
             from ovon.config.base import parse_seed_list
             from ovon.task.pointgoal import pointnav_specs
 
@@ -85,8 +99,10 @@ class EpisodeSource:
         if self.data:
             from ovon.dataset.io import EpisodeDataset
 
-            inputs["data"] = {"path": path_identity(self.data),
-                              "split": EpisodeDataset(self.data, self.split).fingerprint()}
+            inputs["data"] = {
+                "path": path_identity(self.data),
+                "split": EpisodeDataset(self.data, self.split).fingerprint(),
+            }
             inputs["scenes"] = {"path": path_identity(self.scenes or "")}
         return config, inputs
 
@@ -122,15 +138,17 @@ def init_identity(init: str | Path) -> dict:
     return {"sha256": file_sha256(p) if p.is_file() else str(p)}
 
 
-def open_run_folder(cfg: TrainConfig, out: str | Path, config_keys: dict, inputs: dict, resume: bool,
-                    init: str | None) -> RunFolder | None:
+def open_run_folder(
+    cfg: TrainConfig, out: str | Path, config_keys: dict, inputs: dict, resume: bool, init: str | None
+) -> RunFolder | None:
     """Rank 0 opens (creates or reopens) `out` for this run and holds its lock until `close()`; other
     torchrun ranks write nothing there and get None. Writes `config.json` (the resolved config)."""
     if int(os.environ.get("RANK", "0")) != 0:
         return None
     inputs = {**inputs, **({"init": init_identity(init)} if init else {})}
-    folder = RunFolder.open(out, KIND, {**to_dict(cfg), **config_keys}, inputs, resume=resume,
-                            may_change=MAY_CHANGE, markers=MARKERS)
+    folder = RunFolder.open(
+        out, KIND, {**to_dict(cfg), **config_keys}, inputs, resume=resume, may_change=MAY_CHANGE, markers=MARKERS
+    )
     try:
         atomic_write_text(Path(out) / "config.json", json.dumps(to_dict(cfg), indent=1, default=str))
     except BaseException:

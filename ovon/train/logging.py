@@ -43,17 +43,25 @@ class RunLogger:
 
             rows, torn = _parse(self.jsonl, warn=False)
             if torn:
-                warnings.warn(f"{self.jsonl}: dropped {len(torn)} line(s) that are not complete metrics rows "
-                              f"(line {', '.join(map(str, torn[:5]))}: a write cut short by a kill); resuming at "
-                              f"update {start_update}", stacklevel=2)
+                warnings.warn(
+                    f"{self.jsonl}: dropped {len(torn)} line(s) that are not complete metrics rows "
+                    f"(line {', '.join(map(str, torn[:5]))}: a write cut short by a kill); resuming at "
+                    f"update {start_update}",
+                    stacklevel=2,
+                )
             keep = [ln for ln, r in rows if r.get("update", 0) <= start_update]
             atomic_write_text(self.jsonl, "".join(ln + "\n" for ln in keep))
         self.writer = SummaryWriter(str(self.out_dir / "tb"), purge_step=start_step if start_step else None)
         if progress:
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-            self._bar = Progress("[bold]{task.description}", BarColumn(), MofNCompleteColumn(),
-                                 TimeRemainingColumn(), TextColumn("{task.fields[info]}"))
+            self._bar = Progress(
+                "[bold]{task.description}",
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeRemainingColumn(),
+                TextColumn("{task.fields[info]}"),
+            )
             self._bar.start()
             self._task = self._bar.add_task(description, total=total_updates, completed=start_update, info="")
 
@@ -103,8 +111,11 @@ def _parse(path: Path, warn: bool = True) -> tuple[list[tuple[str, dict[str, Any
         else:
             torn.append(i)
     if torn and warn:
-        warnings.warn(f"{path}: skipped {len(torn)} line(s) that are not complete metrics rows (line "
-                      f"{', '.join(map(str, torn[:5]))})", stacklevel=3)
+        warnings.warn(
+            f"{path}: skipped {len(torn)} line(s) that are not complete metrics rows (line "
+            f"{', '.join(map(str, torn[:5]))})",
+            stacklevel=3,
+        )
     return rows, torn
 
 

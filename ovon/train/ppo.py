@@ -43,12 +43,16 @@ def finetune_lrs(ft: FinetuneConfig, update: int) -> tuple[float, float]:
         return min(1.0, max(0.0, (u - a) / (b - a)))
 
     critic = ft.critic_lr + ramp(update, ft.critic_decay_start * s, ft.critic_decay_end * s) * (
-        ft.critic_lr_final - ft.critic_lr)
+        ft.critic_lr_final - ft.critic_lr
+    )
     if update < ft.actor_unfreeze * s:
         actor = 0.0
     else:
-        actor = ft.actor_lr * (ramp(update, ft.actor_unfreeze * s, ft.actor_warmup_end * s)
-                               if ft.actor_warmup_end > ft.actor_unfreeze else 1.0)
+        actor = ft.actor_lr * (
+            ramp(update, ft.actor_unfreeze * s, ft.actor_warmup_end * s)
+            if ft.actor_warmup_end > ft.actor_unfreeze
+            else 1.0
+        )
     return critic, actor
 
 
@@ -71,8 +75,16 @@ def kl_to(ref_logits: torch.Tensor, logits: torch.Tensor) -> torch.Tensor:
     return (ref.exp() * (ref - torch.log_softmax(logits, -1))).sum(-1).mean()
 
 
-def reference_logits(reference, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, start_seq: torch.Tensor,
-                     prefix: int, steps: int, state) -> tuple[torch.Tensor, object]:
+def reference_logits(
+    reference,
+    img,
+    goal_seq: torch.Tensor,
+    prev_seq: torch.Tensor,
+    start_seq: torch.Tensor,
+    prefix: int,
+    steps: int,
+    state,
+) -> tuple[torch.Tensor, object]:
     """The frozen initial policy's logits on the chunk's `steps` steps after `prefix` context steps, and its
     memory after them. An LSTM reference needs its own (h, c) carried from chunk to chunk: the policy's
     acting state is what the *fine-tuned* LSTM remembers, and read by the reference it gives logits that
@@ -84,8 +96,9 @@ def reference_logits(reference, img, goal_seq: torch.Tensor, prev_seq: torch.Ten
     return logits[:, prefix:], state
 
 
-def critic_values(critic, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, start_seq: torch.Tensor,
-                  prefix: int, steps: int, state) -> tuple[torch.Tensor, object]:
+def critic_values(
+    critic, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, start_seq: torch.Tensor, prefix: int, steps: int, state
+) -> tuple[torch.Tensor, object]:
     """A separate critic's values on the chunk's `steps` steps after `prefix` context steps and on the
     bootstrap observation after them, and its memory at the next chunk's start. Like the reference policy,
     an LSTM critic carries its own (h, c) from chunk to chunk; a transformer's memory is the prefix."""
@@ -103,8 +116,9 @@ def critic_values(critic, img, goal_seq: torch.Tensor, prev_seq: torch.Tensor, s
     return torch.cat([v, v_boot], 1)[:, prefix:], after
 
 
-def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False,
-              init: str | None = None) -> dict:
+def train_ppo(
+    cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, resume: bool = False, init: str | None = None
+) -> dict:
     """Run PPO (from scratch, or fine-tuning `init`); returns the last logged metrics."""
     finetune = init is not None
     algo = "ppo-finetune" if finetune else "ppo"
@@ -131,8 +145,10 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 policy.critic_head.requires_grad_(False)
                 groups["critic"] = [p for p in critic_net.parameters() if p.requires_grad]
             critic_lr, actor_lr = finetune_lrs(ft, 0)
-            param_groups = [{"params": groups["critic"], "lr": critic_lr, "name": "critic"},
-                            {"params": groups["actor"], "lr": actor_lr, "name": "actor"}]
+            param_groups = [
+                {"params": groups["critic"], "lr": critic_lr, "name": "critic"},
+                {"params": groups["actor"], "lr": actor_lr, "name": "actor"},
+            ]
             if not ft.freeze_prev_action and groups["prev_action"]:
                 param_groups.append({"params": groups["prev_action"], "lr": actor_lr, "name": "prev_action"})
             optimizer = torch.optim.Adam(param_groups, eps=cfg.adam_eps)
@@ -188,8 +204,9 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 if critic_net is not None:  # its memory at the first chunk is the policy's (fresh: zeros)
                     if critic_state0 is None and state0 is not None:
                         critic_state0 = state0
-                    values, critic_state = critic_values(critic_net, img, goal_seq, prev_seq, start_seq, P, T,
-                                                         critic_state0)
+                    values, critic_state = critic_values(
+                        critic_net, img, goal_seq, prev_seq, start_seq, P, T, critic_state0
+                    )
                 old_logp = policy.distribution(logits[:, :T] / pc.temperature).log_prob(act_seq)
                 adv, returns = gae(rew, values, ro.dones.to(dev), pc.gamma, pc.gae_lambda)
                 ev = explained_variance(values[:, :T], returns)
@@ -197,8 +214,9 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                 behaviour_kl = (log_ratio.exp() - 1 - log_ratio).mean().item()
                 ref_logits = None
                 if reference is not None:  # its memory at the first chunk is the policy's: they are equal
-                    ref_logits, ref_state = reference_logits(reference, img, goal_seq, prev_seq, start_seq, P, T,
-                                                             state0 if ref_state is None else ref_state)
+                    ref_logits, ref_state = reference_logits(
+                        reference, img, goal_seq, prev_seq, start_seq, P, T, state0 if ref_state is None else ref_state
+                    )
             if not gate_open:  # every rank opens the gate at the same update (their weights stay equal)
                 gate_open = dist.all_reduce_mean({"ev": ev}, run.info)["ev"] >= ft.critic_warmup_ev
             labels = ro.labels[:, :T].to(dev)
@@ -206,21 +224,32 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             # ---- PPO epochs over env minibatches ------------------------------------------------
             policy.train()
             n_mb = max(1, min(pc.minibatches, n_envs))
-            stats: dict[str, list[float]] = {k: [] for k in ("loss", "policy_loss", "value_loss", "entropy",
-                                                             "approx_kl", "clipfrac", "grad_norm", "anchor_loss")}
+            stats: dict[str, list[float]] = {
+                k: []
+                for k in (
+                    "loss",
+                    "policy_loss",
+                    "value_loss",
+                    "entropy",
+                    "approx_kl",
+                    "clipfrac",
+                    "grad_norm",
+                    "anchor_loss",
+                )
+            }
             for _ in range(pc.epochs):
                 perm = torch.randperm(n_envs)
                 for mb in perm.chunk(n_mb):
                     mbd = mb.to(dev)
                     mb_img = map_images(img, lambda x, i=mbd, n=P + T: x[i, :n])
-                    obs = policy.make_obs(features(policy, mb_img), goal_seq[mbd, :P + T])
-                    logits, v = model(obs, prev_seq[mbd, :P + T], start_seq[mbd, :P + T],
-                                      _index_state(state0, mbd))
+                    obs = policy.make_obs(features(policy, mb_img), goal_seq[mbd, : P + T])
+                    logits, v = model(obs, prev_seq[mbd, : P + T], start_seq[mbd, : P + T], _index_state(state0, mbd))
                     logits, v = logits[:, P:], v[:, P:]
                     if critic_model is not None:
-                        cobs = critic_net.make_obs(features(critic_net, mb_img), goal_seq[mbd, :P + T])
-                        v = critic_model(cobs, prev_seq[mbd, :P + T], start_seq[mbd, :P + T],
-                                         _index_state(critic_state0, mbd))[1][:, P:]
+                        cobs = critic_net.make_obs(features(critic_net, mb_img), goal_seq[mbd, : P + T])
+                        v = critic_model(
+                            cobs, prev_seq[mbd, : P + T], start_seq[mbd, : P + T], _index_state(critic_state0, mbd)
+                        )[1][:, P:]
                     d = policy.distribution(logits / pc.temperature)
                     logp = d.log_prob(act_seq[mbd])
                     ratio = (logp - old_logp[mbd]).exp()
@@ -232,8 +261,11 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
                     ent = d.entropy().mean()
                     loss = pg + pc.value_coef * v_loss - pc.entropy_coef * ent
                     if w_anchor > 0:
-                        a_loss = (imitation_loss(logits, labels[mbd], cfg.stop_loss_weight) if anchor == "expert"
-                                  else kl_to(ref_logits[mbd], logits))
+                        a_loss = (
+                            imitation_loss(logits, labels[mbd], cfg.stop_loss_weight)
+                            if anchor == "expert"
+                            else kl_to(ref_logits[mbd], logits)
+                        )
                         loss = loss + w_anchor * a_loss
                         stats["anchor_loss"].append(a_loss.item())
                     optimizer.zero_grad(set_to_none=True)
@@ -249,8 +281,15 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             t2 = time.perf_counter()
             run.step += n_envs * T * run.info.world_size
             scalars = {k: sum(v) / len(v) for k, v in stats.items() if v}
-            scalars.update({"reward/mean": rew.mean().item(), "time/rollout_s": t1 - t0, "time/learn_s": t2 - t1,
-                            "behaviour_kl": behaviour_kl, "explained_variance": ev})
+            scalars.update(
+                {
+                    "reward/mean": rew.mean().item(),
+                    "time/rollout_s": t1 - t0,
+                    "time/learn_s": t2 - t1,
+                    "behaviour_kl": behaviour_kl,
+                    "explained_variance": ev,
+                }
+            )
             if finetune:
                 scalars.update({"anchor/weight": w_anchor, "actor_gate_open": float(gate_open)})
             for g in optimizer.param_groups:
@@ -258,14 +297,21 @@ def train_ppo(cfg: TrainConfig, specs: list[EpisodeSpec], out_dir: str | Path, r
             scalars = dist.all_reduce_mean(scalars, run.info)
             eps = [m for part in dist.gather_objects(ro.finished, run.info) for m in part]
             if run.due(update + 1, total, cfg.log_every):
-                last = {**scalars, **episode_summary(eps),
-                        "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9)}
+                last = {
+                    **scalars,
+                    **episode_summary(eps),
+                    "steps_per_s": n_envs * T * run.info.world_size / max(t2 - t0, 1e-9),
+                }
                 run.log(update + 1, last)
             if run.checkpoint_due(update + 1, total):
-                extra = {} if critic_net is None else {"critic_net": critic_net.state_dict(),
-                                                       "critic_state": critic_state}
-                run.save(update + 1, optimizer, {**collector.state(), "actor_gate_open": gate_open,
-                                                 "ref_state": ref_state, **extra})
+                extra = (
+                    {} if critic_net is None else {"critic_net": critic_net.state_dict(), "critic_state": critic_state}
+                )
+                run.save(
+                    update + 1,
+                    optimizer,
+                    {**collector.state(), "actor_gate_open": gate_open, "ref_state": ref_state, **extra},
+                )
                 run.stop_if_requested()
         run.finish(total)
     finally:

@@ -32,8 +32,9 @@ class TrainRun:
     """`TrainRun(cfg, out_dir, algo, init=...)`: joins the process group, seeds this rank, prepares the
     folder; with `init` (a policy.pt or run folder) the policy and encoder configs become the init's."""
 
-    def __init__(self, cfg: TrainConfig, out_dir: str | Path, algo: str, init: str | None = None,
-                 resume: bool = False) -> None:
+    def __init__(
+        self, cfg: TrainConfig, out_dir: str | Path, algo: str, init: str | None = None, resume: bool = False
+    ) -> None:
         self.info = dist.setup(cfg.device)
         self.device = self.info.device
         if cfg.threads > 0:
@@ -48,8 +49,9 @@ class TrainRun:
         self.resume_requested = resume
         self.init_policy = load_init_policy(init, cfg.encoder, cfg.task.kind) if init else None
         if self.init_policy is not None:
-            cfg = dataclasses.replace(cfg, policy=self.init_policy.cfg,
-                                      encoder=self.init_policy.encoder_cfg or cfg.encoder)
+            cfg = dataclasses.replace(
+                cfg, policy=self.init_policy.cfg, encoder=self.init_policy.encoder_cfg or cfg.encoder
+            )
         self.cfg = cfg
         self.table: dict = {}
         self.envs = None
@@ -86,19 +88,27 @@ class TrainRun:
         mine = dist.shard(list(specs), self.info)
         # PointNav: the goal input is the env's goal vector (from odometry), so there is no text table.
         table = {} if task.kind == "pointnav" else self.text_table(list(specs))
-        recipe = EnvRecipe(sim=cfg.sim, task=task, encoder=cfg.encoder,
-                           text_table={k: torch.as_tensor(v).float().numpy() for k, v in table.items()},
-                           expert=cfg.expert if label else None, expert_cfg=expert_config(cfg) if label else None,
-                           expert_viewpoint_radius=cfg.expert_viewpoint_radius_m, scene_repeat=cfg.scene_repeat,
-                           curriculum_start_m=cfg.curriculum.start_m, curriculum_episodes=cfg.curriculum.episodes)
+        recipe = EnvRecipe(
+            sim=cfg.sim,
+            task=task,
+            encoder=cfg.encoder,
+            text_table={k: torch.as_tensor(v).float().numpy() for k, v in table.items()},
+            expert=cfg.expert if label else None,
+            expert_cfg=expert_config(cfg) if label else None,
+            expert_viewpoint_radius=cfg.expert_viewpoint_radius_m,
+            scene_repeat=cfg.scene_repeat,
+            curriculum_start_m=cfg.curriculum.start_m,
+            curriculum_episodes=cfg.curriculum.episodes,
+        )
         self.envs = TrainEnvs(recipe, mine, cfg.num_envs, cfg.env_workers, cfg.seed * 1000 + self.info.rank)
         return self.envs, self.envs.reset()
 
     def policy_for(self, batch):
         """`build_policy` with the image / goal dims of the envs' first batch."""
         image = batch.image
-        return self.build_policy(int(image.shape[-1]) if isinstance(image, torch.Tensor) else 0,
-                                 int(batch.goal.shape[-1]))
+        return self.build_policy(
+            int(image.shape[-1]) if isinstance(image, torch.Tensor) else 0, int(batch.goal.shape[-1])
+        )
 
     def build_policy(self, image_dim: int, text_dim: int):
         """The init policy (fine-tuning) or a new one, checked against the envs' dims, on this device."""
@@ -109,8 +119,10 @@ class TrainRun:
             image_dim = cfg.encoder.cnn_dim
         policy = self.init_policy or build_policy(cfg.policy, image_dim, text_dim, cfg.encoder)
         if (policy.image_dim, policy.text_dim) != (image_dim, text_dim):
-            raise ValueError(f"policy expects image/text dims {(policy.image_dim, policy.text_dim)}, "
-                             f"the envs give {(image_dim, text_dim)}")
+            raise ValueError(
+                f"policy expects image/text dims {(policy.image_dim, policy.text_dim)}, "
+                f"the envs give {(image_dim, text_dim)}"
+            )
         policy.text_table = self.table
         self.policy = policy.to(self.device)
         return self.policy
@@ -146,11 +158,13 @@ class TrainRun:
             return None
         ckpt = load_checkpoint(self.out)  # on the CPU: load_state_dict copies weights and optimiser state over
         if ckpt["world_size"] != self.info.world_size:
-            raise ValueError(f"checkpoint was written by {ckpt['world_size']} ranks; this run has "
-                             f"{self.info.world_size}")
+            raise ValueError(
+                f"checkpoint was written by {ckpt['world_size']} ranks; this run has {self.info.world_size}"
+            )
         if ckpt.get("algo") not in (None, self.algo):
-            raise ValueError(f"{self.out} holds a {ckpt['algo']!r} run; resume it with that algorithm or "
-                             f"choose another --out")
+            raise ValueError(
+                f"{self.out} holds a {ckpt['algo']!r} run; resume it with that algorithm or choose another --out"
+            )
         self.policy.load_state_dict(ckpt["policy"])
         optimizer.load_state_dict(ckpt["optimizer"])
         self.start_update, self.step = ckpt["update"], ckpt["step"]
@@ -164,8 +178,9 @@ class TrainRun:
         """Called as the update loop starts: from here on the first Ctrl-C / SIGTERM is a stop request
         that the loop honours at the end of its update (`checkpoint_due`, `stop_if_requested`)."""
         self.stop.arm()
-        self.logger = RunLogger(self.out, total, description or self.algo, self.is_main, self.cfg.progress,
-                                self.start_update, self.step)
+        self.logger = RunLogger(
+            self.out, total, description or self.algo, self.is_main, self.cfg.progress, self.start_update, self.step
+        )
         return self.logger
 
     def log(self, update: int, metrics: dict, step: int | None = None) -> None:
@@ -181,11 +196,27 @@ class TrainRun:
         ranks = dist.gather_objects(to_device({**rank_state, "rng": rng_state()}, "cpu"), self.info)
         if self.is_main:
             cfg = self.cfg
-            save_checkpoint(self.out, {"algo": self.algo, "config": to_dict(cfg), "policy": self.policy.state_dict(),
-                                       "optimizer": optimizer.state_dict(), "update": update, "step": self.step,
-                                       "world_size": self.info.world_size, "ranks": ranks, "extra": {}})
-            export_policy(self.policy, self.out, policy_extra(cfg, self.algo, update, self.step, self.policy),
-                          update, cfg.keep_checkpoints)
+            save_checkpoint(
+                self.out,
+                {
+                    "algo": self.algo,
+                    "config": to_dict(cfg),
+                    "policy": self.policy.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "update": update,
+                    "step": self.step,
+                    "world_size": self.info.world_size,
+                    "ranks": ranks,
+                    "extra": {},
+                },
+            )
+            export_policy(
+                self.policy,
+                self.out,
+                policy_extra(cfg, self.algo, update, self.step, self.policy),
+                update,
+                cfg.keep_checkpoints,
+            )
         dist.barrier(self.info)
 
     def due(self, update: int, total: int, every: int) -> bool:
@@ -210,9 +241,16 @@ class TrainRun:
         """Per-rank parameter checksum (DDP ranks must agree; the torchrun test reads it)."""
         d = self.out / "ranks"
         d.mkdir(parents=True, exist_ok=True)
-        (d / f"rank{self.info.rank}.json").write_text(json.dumps(
-            {"rank": self.info.rank, "world_size": self.info.world_size, "update": update,
-             "checksum": param_checksum(self.policy)}))
+        (d / f"rank{self.info.rank}.json").write_text(
+            json.dumps(
+                {
+                    "rank": self.info.rank,
+                    "world_size": self.info.world_size,
+                    "update": update,
+                    "checksum": param_checksum(self.policy),
+                }
+            )
+        )
 
     def close(self) -> None:
         self.stop.disarm()
@@ -235,12 +273,15 @@ def load_init_policy(path: str | Path, encoder_cfg, task_kind: str | None = None
 
     policy = ActorCritic.load(path, flag="--init")
     if policy.encoder_cfg is not None and policy.encoder_cfg.image != encoder_cfg.image:
-        raise ValueError(f"--init {str(path)!r} was trained with encoder {policy.encoder_cfg.image!r}, "
-                         f"not {encoder_cfg.image!r}")
+        raise ValueError(
+            f"--init {str(path)!r} was trained with encoder {policy.encoder_cfg.image!r}, not {encoder_cfg.image!r}"
+        )
     trained_for = ((policy.checkpoint_extra or {}).get("task") or {}).get("kind")
     if task_kind is not None and trained_for is not None and trained_for != task_kind:
-        raise ValueError(f"--init {str(path)!r} is a {trained_for} policy, this run trains {task_kind}; fix: pass "
-                         f"a policy trained with --task {task_kind}")
+        raise ValueError(
+            f"--init {str(path)!r} is a {trained_for} policy, this run trains {task_kind}; fix: pass "
+            f"a policy trained with --task {task_kind}"
+        )
     return policy
 
 
@@ -255,9 +296,15 @@ def policy_extra(cfg: TrainConfig, algo: str, update: int, step: int, policy) ->
     from ovon.config.base import to_dict
 
     table = getattr(policy, "text_table", None) or {}
-    return {"algo": algo, "update": update, "step": step, "expert": cfg.expert, "task": to_dict(cfg.task),
-            "text_table": {k: torch.as_tensor(v).float() for k, v in table.items()},
-            "camera": {k: v for k, v in to_dict(cfg.sim.camera).items() if isinstance(v, int | float | str)}}
+    return {
+        "algo": algo,
+        "update": update,
+        "step": step,
+        "expert": cfg.expert,
+        "task": to_dict(cfg.task),
+        "text_table": {k: torch.as_tensor(v).float() for k, v in table.items()},
+        "camera": {k: v for k, v in to_dict(cfg.sim.camera).items() if isinstance(v, int | float | str)},
+    }
 
 
 def param_checksum(module: torch.nn.Module) -> float:

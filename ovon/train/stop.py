@@ -39,8 +39,11 @@ class StopRequest:
                 raise KeyboardInterrupt
             return
         self.requested = True
-        print("ovon: stopping after this update, with a checkpoint (Ctrl-C again to stop now)", file=sys.stderr,
-              flush=True)
+        print(
+            "ovon: stopping after this update, with a checkpoint (Ctrl-C again to stop now)",
+            file=sys.stderr,
+            flush=True,
+        )
 
     def disarm(self) -> None:
         if not self._previous:

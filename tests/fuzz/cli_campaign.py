@@ -90,8 +90,13 @@ def build_world(work: Path) -> World:
     if not (w.data / "val_seen").exists():
         generate(w.scenes, w.data, tiny_generation_config(), splits=VAL_SPLITS, workers=2, progress=False)
     if not (w.policy / "policy.pt").exists():
-        subprocess.run(ovon_cmd(["train", "--algo", "dagger", "--preset", "tiny", "--procedural", "0-1",
-                                 "--out", str(w.policy)]), env=env(), check=True, capture_output=True, cwd=work)
+        subprocess.run(
+            ovon_cmd(["train", "--algo", "dagger", "--preset", "tiny", "--procedural", "0-1", "--out", str(w.policy)]),
+            env=env(),
+            check=True,
+            capture_output=True,
+            cwd=work,
+        )
     return w
 
 
@@ -163,8 +168,22 @@ def evaluate_cases(w: World, rnd: random.Random) -> list[Case]:
     def base(out: str | None = None, agent: str = "random") -> tuple[list[str], str]:
         n[0] += 1
         out = out or str(w.work / "runs" / f"e{n[0]}")
-        return ["evaluate", "--agent", agent, "--data", str(w.data), "--scenes", str(w.scenes), "--no-progress",
-                "--workers", "1", "--set", "task.max_steps=40", "--out", out], out
+        return [
+            "evaluate",
+            "--agent",
+            agent,
+            "--data",
+            str(w.data),
+            "--scenes",
+            str(w.scenes),
+            "--no-progress",
+            "--workers",
+            "1",
+            "--set",
+            "task.max_steps=40",
+            "--out",
+            out,
+        ], out
 
     def err(extra: list[str], *needles: str, agent: str = "random") -> None:
         argv, out = base(agent=agent)
@@ -172,9 +191,17 @@ def evaluate_cases(w: World, rnd: random.Random) -> list[Case]:
 
     def ok(extra: list[str], check: str = "counts", agent: str = "random") -> None:
         argv, out = base(agent=agent)
-        cases.append(Case("evaluate", argv + extra + ["--splits", "val_seen", "--episodes", "2"]
-                          if "--splits" not in extra and "--episodes" not in extra else argv + extra, "ok",
-                          check=check, out=out))
+        cases.append(
+            Case(
+                "evaluate",
+                argv + extra + ["--splits", "val_seen", "--episodes", "2"]
+                if "--splits" not in extra and "--episodes" not in extra
+                else argv + extra,
+                "ok",
+                check=check,
+                out=out,
+            )
+        )
 
     for v in ["-1", "0", "abc", "1.5", "", "1e400", "nan", "-0", "0x10", "1,2"]:
         err(["--episodes", v], "--episodes")
@@ -188,42 +215,73 @@ def evaluate_cases(w: World, rnd: random.Random) -> list[Case]:
     for v in ["wind", "actuation:foo", "actuation:ilqr*abc", "odometry:1", "actuation:ilqr*-1", "actuation:*1e400"]:
         err(["--noise", v], "--noise")
     for key, val, needle in [
-        ("task.success_distance", "-1", "task.success_distance"), ("task.success_distance", "0", "success_distance"),
-        ("task.max_steps", "0", "task.max_steps"), ("task.max_steps", "-5", "task.max_steps"),
-        ("task.max_steps", "1e400", "task.max_steps"), ("task.max_steps", "abc", "task.max_steps"),
-        ("task.max_steps", "2.5", "task.max_steps"), ("task.seen_fraction", "2", "task.seen_fraction"),
-        ("task.reward.kind", "x", "task.reward.kind"), ("sim.camera.width", "0", "sim.camera.width"),
-        ("sim.camera.width", "-160", "sim.camera.width"), ("sim.camera.width", "100000", "sim.camera.width"),
-        ("sim.camera.height", "0", "sim.camera.height"), ("sim.camera.hfov_deg", "180", "sim.camera.hfov_deg"),
-        ("sim.camera.hfov_deg", "0", "sim.camera.hfov_deg"), ("sim.camera.hfov_deg", ".nan", "hfov_deg"),
-        ("sim.camera.min_depth", "9", "sim.camera.min_depth"), ("sim.camera.backend", "vulkan", "backend"),
-        ("sim.agent.forward_step", "0", "sim.agent.forward_step"), ("sim.agent.radius", "-0.1", "radius"),
-        ("sim.agent.turn_angle_deg", "0", "turn_angle_deg"), ("sim.nav.cell_size", "0", "sim.nav.cell_size"),
-        ("sim.nav.cell_size", "1e-9", "cell_size"), ("sim.noise.actuation", "wind", "sim.noise.actuation"),
-        ("sim.noise.odometry", "maybe", "sim.noise.odometry"), ("sim.camrea.width", "3", "camrea"),
-        ("sim", "3", "sim"), ("episodes", "3", "episodes"), ("task", "", "task"), ("", "1", "override"),
+        ("task.success_distance", "-1", "task.success_distance"),
+        ("task.success_distance", "0", "success_distance"),
+        ("task.max_steps", "0", "task.max_steps"),
+        ("task.max_steps", "-5", "task.max_steps"),
+        ("task.max_steps", "1e400", "task.max_steps"),
+        ("task.max_steps", "abc", "task.max_steps"),
+        ("task.max_steps", "2.5", "task.max_steps"),
+        ("task.seen_fraction", "2", "task.seen_fraction"),
+        ("task.reward.kind", "x", "task.reward.kind"),
+        ("sim.camera.width", "0", "sim.camera.width"),
+        ("sim.camera.width", "-160", "sim.camera.width"),
+        ("sim.camera.width", "100000", "sim.camera.width"),
+        ("sim.camera.height", "0", "sim.camera.height"),
+        ("sim.camera.hfov_deg", "180", "sim.camera.hfov_deg"),
+        ("sim.camera.hfov_deg", "0", "sim.camera.hfov_deg"),
+        ("sim.camera.hfov_deg", ".nan", "hfov_deg"),
+        ("sim.camera.min_depth", "9", "sim.camera.min_depth"),
+        ("sim.camera.backend", "vulkan", "backend"),
+        ("sim.agent.forward_step", "0", "sim.agent.forward_step"),
+        ("sim.agent.radius", "-0.1", "radius"),
+        ("sim.agent.turn_angle_deg", "0", "turn_angle_deg"),
+        ("sim.nav.cell_size", "0", "sim.nav.cell_size"),
+        ("sim.nav.cell_size", "1e-9", "cell_size"),
+        ("sim.noise.actuation", "wind", "sim.noise.actuation"),
+        ("sim.noise.odometry", "maybe", "sim.noise.odometry"),
+        ("sim.camrea.width", "3", "camrea"),
+        ("sim", "3", "sim"),
+        ("episodes", "3", "episodes"),
+        ("task", "", "task"),
+        ("", "1", "override"),
         ("sim.camera.width", "[" * 3000 + "]" * 3000, "sim.camera.width"),
     ]:
         err(["--set", f"{key}={val}"], needle)
     err(["--set", "novalue"], "key=value")
     for extra, needle in [
-        (["--agent-arg", "bogus=1"], "bogus"), (["--agent-arg", "novalue"], "--agent-arg"),
-        (["--agent-arg", "=1"], "--agent-arg"), (["--agent-arg", "stop_probability=abc"], "stop_probability"),
+        (["--agent-arg", "bogus=1"], "bogus"),
+        (["--agent-arg", "novalue"], "--agent-arg"),
+        (["--agent-arg", "=1"], "--agent-arg"),
+        (["--agent-arg", "stop_probability=abc"], "stop_probability"),
         (["--agent-arg", "seed=" + "[" * 3000 + "]" * 3000], "agent 'random'"),
         (["--agent-arg", "seed=-1"], "seed"),
     ]:
         err(extra, needle)
-    for agent, needle in [("nope", "nope"), ("json:JSONDecoder", "JSONDecoder"), ("os:system", "os:system"),
-                          ("x:", "x:"), (":Y", ":Y"), ("../a:B", "../a:B"), ("ovon.agents:BUILTIN", "BUILTIN"),
-                          ("no_such_mod:Agent", "no_such_mod"), ("ovon.agents.base:Agent", "Agent"),
-                          ("policy", "--checkpoint")]:
+    for agent, needle in [
+        ("nope", "nope"),
+        ("json:JSONDecoder", "JSONDecoder"),
+        ("os:system", "os:system"),
+        ("x:", "x:"),
+        (":Y", ":Y"),
+        ("../a:B", "../a:B"),
+        ("ovon.agents:BUILTIN", "BUILTIN"),
+        ("no_such_mod:Agent", "no_such_mod"),
+        ("ovon.agents.base:Agent", "Agent"),
+        ("policy", "--checkpoint"),
+    ]:
         err([], needle, agent=agent)
     garbage = w.work / "garbage.pt"
     garbage.write_bytes(b"\x80\x04 not a checkpoint")
     truncated = w.work / "truncated.pt"
     truncated.write_bytes((w.policy / "policy.pt").read_bytes()[:2000])
-    for ckpt, needle in [(garbage, "--checkpoint"), (truncated, "--checkpoint"), (w.work / "nope.pt", "nope.pt"),
-                         (w.work, "--checkpoint"), (Path("/etc/passwd"), "--checkpoint")]:
+    for ckpt, needle in [
+        (garbage, "--checkpoint"),
+        (truncated, "--checkpoint"),
+        (w.work / "nope.pt", "nope.pt"),
+        (w.work, "--checkpoint"),
+        (Path("/etc/passwd"), "--checkpoint"),
+    ]:
         err(["--checkpoint", str(ckpt)], needle, agent="policy")
     afile = w.work / "afile.txt"
     afile.write_text("keep")
@@ -231,14 +289,27 @@ def evaluate_cases(w: World, rnd: random.Random) -> list[Case]:
     cases.append(Case("evaluate", argv, "error", ("--out", "afile.txt"), preserve=str(afile)))
     argv, _ = base("/proc/ovon_no_write")
     cases.append(Case("evaluate", argv, "error", ("/proc/ovon_no_write",)))
-    for what in (["--data", str(w.work / "missing")], ["--data", str(afile)], ["--scenes", str(w.work / "none")],
-                 ["--data", str(w.work / "runs")]):
+    for what in (
+        ["--data", str(w.work / "missing")],
+        ["--data", str(afile)],
+        ["--scenes", str(w.work / "none")],
+        ["--data", str(w.work / "runs")],
+    ):
         err(what, what[0])
     bad = corrupt_datasets(w)
-    refuse = {"nan_start": "start_position", "huge_start": "start_position", "escape_dotdot": "scenes root",
-              "escape_absolute": "scenes root", "not_json": "not valid JSON", "not_gzip": "gzip",
-              "deep_json": "nested", "wrong_types": "start_position", "missing_key": "scene_id",
-              "empty_split": "no <scene>.json.gz", "no_content": "content/"}
+    refuse = {
+        "nan_start": "start_position",
+        "huge_start": "start_position",
+        "escape_dotdot": "scenes root",
+        "escape_absolute": "scenes root",
+        "not_json": "not valid JSON",
+        "not_gzip": "gzip",
+        "deep_json": "nested",
+        "wrong_types": "start_position",
+        "missing_key": "scene_id",
+        "empty_split": "no <scene>.json.gz",
+        "no_content": "content/",
+    }
     for name, d in bad.items():
         argv, out = base()
         argv = [a if a != str(w.data) else str(d) for a in argv] + ["--splits", "val_seen"]
@@ -266,24 +337,50 @@ def evaluate_cases(w: World, rnd: random.Random) -> list[Case]:
     # resume semantics on one folder
     shared = str(w.work / "runs" / "shared")
     first, _ = base(shared)
-    cases.append(Case("resume", first + ["--splits", "val_seen", "--episodes", "4"], "ok", check="counts",
-                      out=shared))
+    cases.append(Case("resume", first + ["--splits", "val_seen", "--episodes", "4"], "ok", check="counts", out=shared))
     again, _ = base(shared)
-    cases.append(Case("resume", again + ["--splits", "val_seen", "--episodes", "4"], "ok", check="counts",
-                      preserve=shared))
+    cases.append(
+        Case("resume", again + ["--splits", "val_seen", "--episodes", "4"], "ok", check="counts", preserve=shared)
+    )
     more, _ = base(shared)
-    cases.append(Case("resume", more + ["--splits", "val_seen,val_unseen", "--episodes", "4", "--seeds", "0,1"],
-                      "ok", check="counts", preserve=shared))
-    for extra, needle in [(["--set", "task.max_steps=41"], "task.max_steps 40 -> 41"),
-                          (["--set", "sim.camera.width=64"], "sim.camera.width"),
-                          (["--noise", "odometry"], "sim.noise.odometry")]:
+    cases.append(
+        Case(
+            "resume",
+            more + ["--splits", "val_seen,val_unseen", "--episodes", "4", "--seeds", "0,1"],
+            "ok",
+            check="counts",
+            preserve=shared,
+        )
+    )
+    for extra, needle in [
+        (["--set", "task.max_steps=41"], "task.max_steps 40 -> 41"),
+        (["--set", "sim.camera.width=64"], "sim.camera.width"),
+        (["--noise", "odometry"], "sim.noise.odometry"),
+    ]:
         argv, _ = base(shared)
         cases.append(Case("resume", argv + extra, "error", (needle,), preserve=shared))
     argv, _ = base(shared, agent="shortest-path")
     cases.append(Case("resume", argv, "error", ('agent "random" -> "shortest-path"',), preserve=shared))
-    spelled = ["evaluate", "--agent", "random", "--data", str(w.data) + "/", "--scenes",
-               os.path.relpath(w.scenes, ROOT) + "/", "--no-progress", "--set", "task.max_steps=40", "--workers", "2",
-               "--splits", "val_seen", "--episodes", "4", "--out", shared]
+    spelled = [
+        "evaluate",
+        "--agent",
+        "random",
+        "--data",
+        str(w.data) + "/",
+        "--scenes",
+        os.path.relpath(w.scenes, ROOT) + "/",
+        "--no-progress",
+        "--set",
+        "task.max_steps=40",
+        "--workers",
+        "2",
+        "--splits",
+        "val_seen",
+        "--episodes",
+        "4",
+        "--out",
+        shared,
+    ]
     cases.append(Case("resume", spelled, "ok", check="counts", preserve=shared))
     # random combinations (an independent oracle says which must run)
     for _ in range(40):
@@ -294,11 +391,29 @@ def evaluate_cases(w: World, rnd: random.Random) -> list[Case]:
 EPISODES = ["1", "2", "0", "-1", "", "x", "2.0", "1e3"]
 SEEDS = ["0", "1", "0,1", "", "0,0", "-1", "a", " 3 "]
 SPLITS = ["val_seen", "val_unseen", "val_seen,val_unseen", "", "val_seen,val_seen", "val_nope", "x/../y"]
-SETS = ["task.max_steps=30", "task.max_steps=0", "task.success_distance=0.5", "task.success_distance=-1",
-        "sim.camera.width=32", "sim.camera.width=0", "sim.camera.hfov_deg=179", "sim.camera.hfov_deg=180",
-        "sim.agent.radius=0.2", "sim.agent.radius=0", "task.seen_fraction=2", "task.reward.kind=sparse", "x=1"]
-GOOD_SETS = {"task.max_steps=30", "task.success_distance=0.5", "sim.camera.width=32", "sim.camera.hfov_deg=179",
-             "sim.agent.radius=0.2", "task.reward.kind=sparse"}
+SETS = [
+    "task.max_steps=30",
+    "task.max_steps=0",
+    "task.success_distance=0.5",
+    "task.success_distance=-1",
+    "sim.camera.width=32",
+    "sim.camera.width=0",
+    "sim.camera.hfov_deg=179",
+    "sim.camera.hfov_deg=180",
+    "sim.agent.radius=0.2",
+    "sim.agent.radius=0",
+    "task.seen_fraction=2",
+    "task.reward.kind=sparse",
+    "x=1",
+]
+GOOD_SETS = {
+    "task.max_steps=30",
+    "task.success_distance=0.5",
+    "sim.camera.width=32",
+    "sim.camera.hfov_deg=179",
+    "sim.agent.radius=0.2",
+    "task.reward.kind=sparse",
+}
 
 
 def random_evaluate_case(w: World, rnd: random.Random, base) -> Case:
@@ -314,8 +429,9 @@ def random_evaluate_case(w: World, rnd: random.Random, base) -> Case:
     except ValueError:
         valid = False
     seeds = [x.strip() for x in s.split(",") if x.strip()]
-    valid &= bool(seeds) and all(x.isdigit() for x in seeds) and len(set(map(int, seeds))) == len(seeds) if seeds \
-        else False
+    valid &= (
+        bool(seeds) and all(x.isdigit() for x in seeds) and len(set(map(int, seeds))) == len(seeds) if seeds else False
+    )
     splits = [x for x in sp.split(",") if x]
     valid &= bool(splits) and len(set(splits)) == len(splits) and all(x in ("val_seen", "val_unseen") for x in splits)
     valid &= all(x in GOOD_SETS for x in sets)
@@ -331,28 +447,56 @@ def dataset_cases(w: World) -> list[Case]:
         out = out or str(w.work / "gen" / f"g{n[0]}")
         return ["dataset", "generate", "--scenes", str(w.scenes), "--out", out, "--no-progress", *extra], out
 
-    for key, val in [("episodes_per_val_split", "-5"), ("episodes_per_val_split", "0"), ("episodes_per_train_scene",
-                     "abc"), ("seed", "-1"), ("seed", "1.5"), ("decimals", "0"), ("viewpoints.render_size", "0"),
-                     ("viewpoints.render_size", "100000"), ("viewpoints.hfov_deg", "0"), ("viewpoints.hfov_deg", "180"),
-                     ("viewpoints.grid_step", "0"), ("viewpoints.tilts_deg", "[]"), ("viewpoints.tilts_deg", "[100]"),
-                     ("viewpoints.min_score", "1"), ("viewpoints.max_viewpoints", "-1"), ("viewpoints.backend", "x"),
-                     ("starts.min_geodesic", "40"), ("starts.max_geodesic", "0"), ("starts.max_tries", "0"),
-                     ("splits.holdout_fraction", "1"), ("splits.holdout_fraction", "0"),
-                     ("splits.similarity_threshold", "2"), ("splits.children", "maybe"), ("nope", "1"),
-                     ("viewpoints.render_sise", "64")]:
+    for key, val in [
+        ("episodes_per_val_split", "-5"),
+        ("episodes_per_val_split", "0"),
+        ("episodes_per_train_scene", "abc"),
+        ("seed", "-1"),
+        ("seed", "1.5"),
+        ("decimals", "0"),
+        ("viewpoints.render_size", "0"),
+        ("viewpoints.render_size", "100000"),
+        ("viewpoints.hfov_deg", "0"),
+        ("viewpoints.hfov_deg", "180"),
+        ("viewpoints.grid_step", "0"),
+        ("viewpoints.tilts_deg", "[]"),
+        ("viewpoints.tilts_deg", "[100]"),
+        ("viewpoints.min_score", "1"),
+        ("viewpoints.max_viewpoints", "-1"),
+        ("viewpoints.backend", "x"),
+        ("starts.min_geodesic", "40"),
+        ("starts.max_geodesic", "0"),
+        ("starts.max_tries", "0"),
+        ("splits.holdout_fraction", "1"),
+        ("splits.holdout_fraction", "0"),
+        ("splits.similarity_threshold", "2"),
+        ("splits.children", "maybe"),
+        ("nope", "1"),
+        ("viewpoints.render_sise", "64"),
+    ]:
         argv, out = gen("--set", f"{key}={val}")
         cases.append(Case("generate", argv, "error", (key.split(".")[-1],), out=out))
-    for extra, needle in [(["--categories", str(w.work / "missing.json")], "missing.json"),
-                          (["--split", "val_nope"], "--split"), (["--split", "train", "--split", "train"], "--split"),
-                          (["--workers", "0"], "--workers"), (["--workers", "x"], "--workers"),
-                          (["--executor", "dask"], "--executor"), (["--config", str(w.work / "missing.yaml")],
-                                                                   "missing.yaml"),
-                          (["--preset", "huge"], "--preset")]:
+    for extra, needle in [
+        (["--categories", str(w.work / "missing.json")], "missing.json"),
+        (["--split", "val_nope"], "--split"),
+        (["--split", "train", "--split", "train"], "--split"),
+        (["--workers", "0"], "--workers"),
+        (["--workers", "x"], "--workers"),
+        (["--executor", "dask"], "--executor"),
+        (["--config", str(w.work / "missing.yaml")], "missing.yaml"),
+        (["--preset", "huge"], "--preset"),
+    ]:
         argv, out = gen(*extra)
         cases.append(Case("generate", argv, "error", (needle,), out=out))
-    for i, (text, needle) in enumerate([("a: [\n", "not valid YAML"), ("- 1\n- 2\n", "mapping"),
-                                        ("seed: abc\n", "seed"), ("viewpoints: 3\n", "viewpoints"),
-                                        ("bogus: 1\n", "bogus")]):
+    for i, (text, needle) in enumerate(
+        [
+            ("a: [\n", "not valid YAML"),
+            ("- 1\n- 2\n", "mapping"),
+            ("seed: abc\n", "seed"),
+            ("viewpoints: 3\n", "viewpoints"),
+            ("bogus: 1\n", "bogus"),
+        ]
+    ):
         p = w.work / f"cfg{i}.yaml"
         p.write_text(text)
         argv, out = gen("--config", str(p))
@@ -367,30 +511,54 @@ def dataset_cases(w: World) -> list[Case]:
     argv[argv.index("--scenes") + 1] = str(w.work / "noscenes")
     cases.append(Case("generate", argv, "error", ("--scenes",), out=out))
     # the existing dataset: the same generation resumes (nothing changes); another one is refused
-    same = ["dataset", "generate", "--scenes", str(w.scenes), "--out", str(w.data), "--no-progress", "--preset",
-            "fast", "--set", "episodes_per_train_scene=12", "--set", "episodes_per_val_split=16", "--set",
-            "viewpoints.render_size=48", "--set", "viewpoints.max_viewpoints=6", "--split", "val_seen"]
+    same = [
+        "dataset",
+        "generate",
+        "--scenes",
+        str(w.scenes),
+        "--out",
+        str(w.data),
+        "--no-progress",
+        "--preset",
+        "fast",
+        "--set",
+        "episodes_per_train_scene=12",
+        "--set",
+        "episodes_per_val_split=16",
+        "--set",
+        "viewpoints.render_size=48",
+        "--set",
+        "viewpoints.max_viewpoints=6",
+        "--split",
+        "val_seen",
+    ]
     cases.append(Case("generate-resume", same, "ok", check="unchanged", preserve=str(w.data)))
     for key, val in [("seed", "1"), ("episodes_per_val_split", "17"), ("viewpoints.render_size", "64")]:
         cases.append(Case("generate-resume", same + ["--set", f"{key}={val}"], "error", (key,), preserve=str(w.data)))
     # validate / stats / splits
     for name, d in corrupt_datasets_cached(w).items():
         argv = ["dataset", "validate", str(d), "--scenes", str(w.scenes), "--split", "val_seen"]
-        refuse = name in ("not_json", "not_gzip", "deep_json", "wrong_types", "missing_key", "nan_start",
-                          "huge_start")
+        refuse = name in ("not_json", "not_gzip", "deep_json", "wrong_types", "missing_key", "nan_start", "huge_start")
         cases.append(Case("validate", argv, "error" if refuse else "fail1", () if not refuse else ("json.gz",)))
     cases.append(Case("validate", ["dataset", "validate", str(w.data), "--scenes", str(w.scenes)], "ok"))
-    for extra, needle in [([str(w.work / "missing"), "--scenes", str(w.scenes)], "DATA"),
-                          ([str(w.data), "--scenes", str(w.work / "missing")], "--scenes"),
-                          ([str(w.data), "--scenes", str(w.scenes), "--split", "../x"], "--split"),
-                          ([str(w.data), "--scenes", str(w.scenes), "--max-episodes-per-scene", "-1"],
-                           "--max-episodes")]:
+    for extra, needle in [
+        ([str(w.work / "missing"), "--scenes", str(w.scenes)], "DATA"),
+        ([str(w.data), "--scenes", str(w.work / "missing")], "--scenes"),
+        ([str(w.data), "--scenes", str(w.scenes), "--split", "../x"], "--split"),
+        ([str(w.data), "--scenes", str(w.scenes), "--max-episodes-per-scene", "-1"], "--max-episodes"),
+    ]:
         cases.append(Case("validate", ["dataset", "validate", *extra], "error", (needle,)))
     cases.append(Case("stats", ["dataset", "stats", str(w.work / "missing")], "error", ("DATA",)))
     cases.append(Case("stats", ["dataset", "stats", str(w.data), "--json"], "ok"))
     bad = corrupt_datasets_cached(w)
-    cases.append(Case("stats", ["dataset", "stats", str(bad["string_geodesic"])], "error",
-                      (".json.gz", "episodes[0]", "geodesic_distance")))
+    cases.append(
+        Case(
+            "stats",
+            ["dataset", "stats", str(bad["string_geodesic"])],
+            "error",
+            (".json.gz", "episodes[0]", "geodesic_distance"),
+        )
+    )
     for i, text in enumerate(['{"train": [1, ', '{"train": 5}', "[1]"]):
         d = w.work / "bad_cats" / f"c{i}"
         if not d.exists():
@@ -402,10 +570,15 @@ def dataset_cases(w: World) -> list[Case]:
         argv, out = gen("--split", "val_seen", "--preset", "fast", "--set", "viewpoints.render_size=48")
         argv[argv.index("--scenes") + 1] = str(broken_world(w, kind))
         cases.append(Case("generate", argv, "error", (needle,), out=out))
-    for extra, needle in [(["--holdout", "1.5"], "--holdout"), (["--holdout", "0"], "--holdout"),
-                          (["--threshold", "abc"], "--threshold"), (["--seed", "-1"], "--seed"),
-                          (["--out", str(w.work)], "--out"), ([], "--vocabulary"),
-                          (["--vocabulary", "--scenes", str(w.scenes)], "--vocabulary")]:
+    for extra, needle in [
+        (["--holdout", "1.5"], "--holdout"),
+        (["--holdout", "0"], "--holdout"),
+        (["--threshold", "abc"], "--threshold"),
+        (["--seed", "-1"], "--seed"),
+        (["--out", str(w.work)], "--out"),
+        ([], "--vocabulary"),
+        (["--vocabulary", "--scenes", str(w.scenes)], "--vocabulary"),
+    ]:
         vocab = [] if extra in ([], ["--vocabulary", "--scenes", str(w.scenes)]) else ["--vocabulary"]
         out = [] if "--out" in extra else ["--out", str(w.work / "cats.json")]
         cases.append(Case("splits", ["dataset", "splits", *vocab, *extra, *out], "error", (needle,)))
@@ -449,17 +622,53 @@ def other_cases(w: World) -> list[Case]:
     """Commands other sessions own: covered too, their results reported per family."""
     cases = []
     t = ["train", "--algo", "dagger", "--preset", "tiny", "--procedural", "0-1"]
-    for key, val in [("num_envs", "0"), ("rollout_steps", "0"), ("lr", "-1"), ("total_steps", "abc"),
-                     ("policy.heads", "3"), ("sim.camera.width", "0"), ("task.max_steps", "0"),
-                     ("ppo.clip", "-1"), ("dagger.beta_start", "2")]:
-        cases.append(Case("train", t + ["--set", f"{key}={val}", "--out", str(w.work / "tr" / key)], "error",
-                          (key.split(".")[-1],), out=str(w.work / "tr" / key)))
-    cases.append(Case("train", t + ["--out", str(w.work / "afile.txt")], "error", ("afile.txt",),
-                      preserve=str(w.work / "afile.txt")))
-    cases.append(Case("train", ["train", "--algo", "ppo", "--preset", "tiny", "--procedural", "0-1", "--resume",
-                                "--out", str(w.policy)], "error", ("algo",), preserve=str(w.policy)))
-    cases.append(Case("train", t + ["--set", "policy.hidden=64", "--resume", "--out", str(w.policy)], "error",
-                      ("hidden",), preserve=str(w.policy)))
+    for key, val in [
+        ("num_envs", "0"),
+        ("rollout_steps", "0"),
+        ("lr", "-1"),
+        ("total_steps", "abc"),
+        ("policy.heads", "3"),
+        ("sim.camera.width", "0"),
+        ("task.max_steps", "0"),
+        ("ppo.clip", "-1"),
+        ("dagger.beta_start", "2"),
+    ]:
+        cases.append(
+            Case(
+                "train",
+                t + ["--set", f"{key}={val}", "--out", str(w.work / "tr" / key)],
+                "error",
+                (key.split(".")[-1],),
+                out=str(w.work / "tr" / key),
+            )
+        )
+    cases.append(
+        Case(
+            "train",
+            t + ["--out", str(w.work / "afile.txt")],
+            "error",
+            ("afile.txt",),
+            preserve=str(w.work / "afile.txt"),
+        )
+    )
+    cases.append(
+        Case(
+            "train",
+            ["train", "--algo", "ppo", "--preset", "tiny", "--procedural", "0-1", "--resume", "--out", str(w.policy)],
+            "error",
+            ("algo",),
+            preserve=str(w.policy),
+        )
+    )
+    cases.append(
+        Case(
+            "train",
+            t + ["--set", "policy.hidden=64", "--resume", "--out", str(w.policy)],
+            "error",
+            ("hidden",),
+            preserve=str(w.policy),
+        )
+    )
     broken = w.work / "broken_run"
     if not broken.exists():
         shutil.copytree(w.policy, broken)
@@ -472,34 +681,96 @@ def other_cases(w: World) -> list[Case]:
         with open(torn / "metrics.jsonl", "ab") as f:
             f.write(b'{"update": 99, "st')
     cases.append(Case("train", t + ["--resume", "--out", str(torn)], "ok", check="metrics", preserve=str(torn)))
-    cases.append(Case("train", ["train", "--algo", "dagger", "--preset", "tiny", "--procedural", "x-y", "--out",
-                                str(w.work / "tr" / "proc")], "error", ("x-y",)))
-    for extra, needle in [(["--width", "0"], "width"), (["--hfov", "180"], "hfov"), (["--pose", "1,2"], "--pose"),
-                          (["--pose", "a,b,c,d"], "--pose"), (["--backend", "x"], "--backend"),
-                          (["--pitch", "1000"], "--pitch"), (["--pose", "1e308,0,0,0"], "--pose"),
-                          (["--seed", "-1"], "--seed"), (["--out", str(w.work)], "--out"),
-                          (["--out", str(w.work / "v.jpg")], ".png")]:
+    cases.append(
+        Case(
+            "train",
+            [
+                "train",
+                "--algo",
+                "dagger",
+                "--preset",
+                "tiny",
+                "--procedural",
+                "x-y",
+                "--out",
+                str(w.work / "tr" / "proc"),
+            ],
+            "error",
+            ("x-y",),
+        )
+    )
+    for extra, needle in [
+        (["--width", "0"], "width"),
+        (["--hfov", "180"], "hfov"),
+        (["--pose", "1,2"], "--pose"),
+        (["--pose", "a,b,c,d"], "--pose"),
+        (["--backend", "x"], "--backend"),
+        (["--pitch", "1000"], "--pitch"),
+        (["--pose", "1e308,0,0,0"], "--pose"),
+        (["--seed", "-1"], "--seed"),
+        (["--out", str(w.work)], "--out"),
+        (["--out", str(w.work / "v.jpg")], ".png"),
+    ]:
         out = [] if "--out" in extra else ["--out", str(w.work / "v.png")]
         cases.append(Case("sim", ["sim", "view", "procedural:3", *extra, *out], "error", (needle,)))
-    cases.append(Case("sim", ["sim", "view", str(w.work / "missing.glb"), "--out", str(w.work / "v.png")], "error",
-                      ("missing.glb",)))
-    cases.append(Case("sim", ["sim", "view", "procedural:x", "--out", str(w.work / "v.png")], "error",
-                      ("procedural",)))
+    cases.append(
+        Case(
+            "sim",
+            ["sim", "view", str(w.work / "missing.glb"), "--out", str(w.work / "v.png")],
+            "error",
+            ("missing.glb",),
+        )
+    )
+    cases.append(Case("sim", ["sim", "view", "procedural:x", "--out", str(w.work / "v.png")], "error", ("procedural",)))
     cases.append(Case("sim", ["sim", "bench", "--steps", "-5"], "error", ("--steps",)))
-    for extra, needle in [(["--split", "train", "--count", "-1"], "--count"), (["--split", "nope", "--count", "1"],
-                                                                              "--split"),
-                          (["--split", "train", "--count", "1", "--seed", "-3"], "--seed")]:
+    for extra, needle in [
+        (["--split", "train", "--count", "-1"], "--count"),
+        (["--split", "nope", "--count", "1"], "--split"),
+        (["--split", "train", "--count", "1", "--seed", "-3"], "--seed"),
+    ]:
         cases.append(Case("scenes", ["scenes", "generate", *extra, "--out", str(w.work / "sc")], "error", (needle,)))
     cases.append(Case("scenes", ["scenes", "inspect", str(w.work / "missing")], "error", ("missing",)))
-    cases.append(Case("report", ["report", str(w.work / "missing"), "--out", str(w.work / "rep")], "error",
-                      ("missing",)))
-    cases.append(Case("video-after-resume", ["video", "--run", str(w.work / "runs" / "shared"), "--episode", "nope",
-                                             "--out", str(w.work / "v.mp4")], "error", ("nope",)))
-    cases.append(Case("video", ["video", "--run", str(w.work / "missing"), "--episode", "0", "--out",
-                                str(w.work / "v.mp4")], "error", ("missing",)))
-    cases.append(Case("video-after-resume", ["video", "--run", str(w.work / "runs" / "shared"), "--episode", "0",
-                                             "--fps", "0", "--split", "val_seen", "--seed", "0", "--out",
-                                             str(w.work / "v.mp4")], "error", ("fps",)))
+    cases.append(
+        Case("report", ["report", str(w.work / "missing"), "--out", str(w.work / "rep")], "error", ("missing",))
+    )
+    cases.append(
+        Case(
+            "video-after-resume",
+            ["video", "--run", str(w.work / "runs" / "shared"), "--episode", "nope", "--out", str(w.work / "v.mp4")],
+            "error",
+            ("nope",),
+        )
+    )
+    cases.append(
+        Case(
+            "video",
+            ["video", "--run", str(w.work / "missing"), "--episode", "0", "--out", str(w.work / "v.mp4")],
+            "error",
+            ("missing",),
+        )
+    )
+    cases.append(
+        Case(
+            "video-after-resume",
+            [
+                "video",
+                "--run",
+                str(w.work / "runs" / "shared"),
+                "--episode",
+                "0",
+                "--fps",
+                "0",
+                "--split",
+                "val_seen",
+                "--seed",
+                "0",
+                "--out",
+                str(w.work / "v.mp4"),
+            ],
+            "error",
+            ("fps",),
+        )
+    )
     for argv in (["nope"], ["evaluate"], ["dataset"], ["evaluate", "--bogus"], ["train", "--algo", "x"]):
         cases.append(Case("argparse", argv, "error", ()))
     return cases
@@ -570,8 +841,11 @@ _STDOUT: dict[int, str] = {}
 def check_output(case: Case, before: dict[str, bytes]) -> str:
     if case.check == "unchanged":
         after = snapshot(case.preserve)
-        changed = [k for k in set(before) | set(after) if before.get(k) != after.get(k)
-                   and not k.endswith("generation_report.json")]
+        changed = [
+            k
+            for k in set(before) | set(after)
+            if before.get(k) != after.get(k) and not k.endswith("generation_report.json")
+        ]
         return f"changed: {changed[:4]}" if changed else ""
     if case.check == "metrics":
         try:
@@ -587,8 +861,11 @@ def check_output(case: Case, before: dict[str, bytes]) -> str:
         if len(keys) != len(recs):
             return "duplicate records"
         argv = case.argv
-        splits = argv[argv.index("--splits") + 1].split(",") if "--splits" in argv else \
-            ["val_seen", "val_seen_synonyms", "val_unseen"]
+        splits = (
+            argv[argv.index("--splits") + 1].split(",")
+            if "--splits" in argv
+            else ["val_seen", "val_seen_synonyms", "val_unseen"]
+        )
         seeds = [s for s in argv[argv.index("--seeds") + 1].split(",") if s.strip()] if "--seeds" in argv else ["0"]
         ep = int(float(argv[argv.index("--episodes") + 1])) if "--episodes" in argv else 10**9
         data = argv[argv.index("--data") + 1]
@@ -624,8 +901,9 @@ def run_case(case: Case) -> Case:
         before = snapshot(case.out)
     t0 = time.time()
     try:
-        res = subprocess.run(ovon_cmd(case.argv), env=env(), cwd=ROOT, capture_output=True, text=True,
-                             timeout=TIMEOUT_S)
+        res = subprocess.run(
+            ovon_cmd(case.argv), env=env(), cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S
+        )
         rc, err = res.returncode, res.stderr
         _STDOUT[id(case)] = res.stdout
     except subprocess.TimeoutExpired:
@@ -663,13 +941,45 @@ def kill_round(kind: str, w: World, rnd: random.Random, index: int) -> Case:
     """Kill the main process 1-3 times, each at a random moment: after a random time, or once a random
     amount of work is on disk (so kills land before, during and near the end of the work)."""
     if kind == "evaluate":
-        args = ["evaluate", "--agent", "frontier", "--data", str(w.data), "--scenes", str(w.scenes), "--splits",
-                "val_seen,val_unseen", "--seeds", "0,1", "--workers", "2", "--no-progress"]
+        args = [
+            "evaluate",
+            "--agent",
+            "frontier",
+            "--data",
+            str(w.data),
+            "--scenes",
+            str(w.scenes),
+            "--splits",
+            "val_seen,val_unseen",
+            "--seeds",
+            "0,1",
+            "--workers",
+            "2",
+            "--no-progress",
+        ]
         ref, files = w.work / "kill" / "eval_ref", ("episodes.jsonl", "summary.json", "table.md", "run_identity.json")
     else:
-        args = ["dataset", "generate", "--scenes", str(w.scenes), "--preset", "fast", "--split", "val_seen", "--split",
-                "val_unseen", "--set", "episodes_per_val_split=10", "--set", "viewpoints.render_size=48", "--set",
-                "viewpoints.max_viewpoints=4", "--workers", "2", "--no-progress"]
+        args = [
+            "dataset",
+            "generate",
+            "--scenes",
+            str(w.scenes),
+            "--preset",
+            "fast",
+            "--split",
+            "val_seen",
+            "--split",
+            "val_unseen",
+            "--set",
+            "episodes_per_val_split=10",
+            "--set",
+            "viewpoints.render_size=48",
+            "--set",
+            "viewpoints.max_viewpoints=4",
+            "--workers",
+            "2",
+            "--no-progress",
+        ]
         ref, files = w.work / "kill" / "gen_ref", None
     if not ref.exists():
         subprocess.run(ovon_cmd([*args, "--out", str(ref)]), env=env(), cwd=ROOT, check=True, capture_output=True)
@@ -683,19 +993,23 @@ def kill_round(kind: str, w: World, rnd: random.Random, index: int) -> Case:
     for _ in range(rnd.randint(1, 3)):
         by_time = rnd.random() < 0.3
         when = rnd.uniform(1.0, 12.0) if by_time else rnd.randint(1, max(1, total - 1))
-        p = subprocess.Popen(ovon_cmd(case.argv), env=env(), cwd=ROOT, stdout=subprocess.DEVNULL,
-                             stderr=subprocess.DEVNULL)
+        p = subprocess.Popen(
+            ovon_cmd(case.argv), env=env(), cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
         start = time.time()
         while p.poll() is None and (time.time() - start < when if by_time else _progress(kind, out) < when):
             time.sleep(0.02)
         before = complete_records(snapshot(str(out)))
-        children += [int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True,
-                                                    text=True).stdout.split()]
+        children += [
+            int(x) for x in subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True, text=True).stdout.split()
+        ]
         p.send_signal(signal.SIGKILL)
         p.wait()
         after = complete_records(snapshot(str(out)))
-        progress.append(f"kill at {time.time() - start:.1f}s with {_progress(kind, out)}/{total} "
-                        f"{'records' if kind == 'evaluate' else 'goal caches + shards'} done")
+        progress.append(
+            f"kill at {time.time() - start:.1f}s with {_progress(kind, out)}/{total} "
+            f"{'records' if kind == 'evaluate' else 'goal caches + shards'} done"
+        )
         if not before <= after:
             case.outcome, case.detail = "data_loss", "records lost at the kill"
             return case
@@ -757,8 +1071,13 @@ def main() -> int:
     by_family: dict[str, Counter] = {}
     for c in done:
         by_family.setdefault(c.family, Counter())[c.outcome] += 1
-    report = {"cases": len(done), "counts": dict(counts), "by_family": {k: dict(v) for k, v in by_family.items()},
-              "seconds": round(time.time() - t0, 1), "results": [asdict(c) for c in done]}
+    report = {
+        "cases": len(done),
+        "counts": dict(counts),
+        "by_family": {k: dict(v) for k, v in by_family.items()},
+        "seconds": round(time.time() - t0, 1),
+        "results": [asdict(c) for c in done],
+    }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=1))
     print(f"{'family':18s} " + " ".join(f"{k:>13s}" for k in ("clear_error", "right_result", *BAD)))
@@ -774,4 +1093,3 @@ def main() -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-

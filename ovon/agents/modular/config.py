@@ -114,21 +114,29 @@ class NavigatorConfig:
     stuck_steps: int = 8
 
     def __post_init__(self) -> None:
-        _positive(self, "navigator", ("stop_distance_m", "turn_threshold_deg", "lookahead_m", "escape_radius_m",
-                                      "retarget_m"))
+        _positive(
+            self, "navigator", ("stop_distance_m", "turn_threshold_deg", "lookahead_m", "escape_radius_m", "retarget_m")
+        )
         if self.kind == "learned":
             from pathlib import Path
 
-            path = Path(self.checkpoint) / "policy.pt" if self.checkpoint and Path(self.checkpoint).is_dir() \
+            path = (
+                Path(self.checkpoint) / "policy.pt"
+                if self.checkpoint and Path(self.checkpoint).is_dir()
                 else Path(self.checkpoint)
+            )
             if not self.checkpoint or not path.is_file():
-                raise ValueError(f"navigator.checkpoint = {self.checkpoint!r} is not a policy file; fix: "
-                                 "--agent-arg navigator.checkpoint=PATH to the policy.pt of `ovon train --task "
-                                 "pointnav` (or its run folder)")
+                raise ValueError(
+                    f"navigator.checkpoint = {self.checkpoint!r} is not a policy file; fix: "
+                    "--agent-arg navigator.checkpoint=PATH to the policy.pt of `ovon train --task "
+                    "pointnav` (or its run folder)"
+                )
         if self.subgoal_m < 0 or self.handover_m < 0 or self.waypoint_keep_m < 0:
-            raise ValueError(f"navigator.subgoal_m = {self.subgoal_m!r}, navigator.handover_m = "
-                             f"{self.handover_m!r} and navigator.waypoint_keep_m = {self.waypoint_keep_m!r} "
-                             "must be >= 0")
+            raise ValueError(
+                f"navigator.subgoal_m = {self.subgoal_m!r}, navigator.handover_m = "
+                f"{self.handover_m!r} and navigator.waypoint_keep_m = {self.waypoint_keep_m!r} "
+                "must be >= 0"
+            )
         if self.goal_ring_bins < 1:
             raise ValueError(f"navigator.goal_ring_bins = {self.goal_ring_bins!r} must be >= 1")
         if self.stuck_steps < 0:

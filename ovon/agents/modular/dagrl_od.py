@@ -40,7 +40,9 @@ class DAgRLODAgent:
         from ovon.agents.policy_agent import PolicyAgent
 
         self.policy = PolicyAgent(
-            self.cfg.checkpoint, deterministic=self.cfg.deterministic, threads=self.cfg.threads,
+            self.cfg.checkpoint,
+            deterministic=self.cfg.deterministic,
+            threads=self.cfg.threads,
             temperature=self.cfg.temperature,
         )
         self.core = ModularCore(self.cfg, self.policy.text)

@@ -138,9 +138,14 @@ class LearnedNavigator:
         if t is None:
             return None
         keep = self.cfg.waypoint_keep_m
-        if (keep > 0 and self.target is not None and request.kind == self.kind and self.aim is not None
-                and math.dist(request.target, self.aim) <= self.cfg.retarget_m
-                and math.hypot(self.target[0] - request.pose.x, self.target[1] - request.pose.z) > keep):
+        if (
+            keep > 0
+            and self.target is not None
+            and request.kind == self.kind
+            and self.aim is not None
+            and math.dist(request.target, self.aim) <= self.cfg.retarget_m
+            and math.hypot(self.target[0] - request.pose.x, self.target[1] - request.pose.z) > keep
+        ):
             t = self.target
         else:
             self.aim = (float(request.target[0]), float(request.target[1]))
@@ -166,8 +171,12 @@ class LearnedNavigator:
             action = int(torch.multinomial(torch.softmax(logits.float(), -1), 1, generator=self.gen).item())
         self.prev = torch.tensor([action])
         self.first = False
-        if (action == MOVE_FORWARD and self.cfg.map_checked_forward and self.planner.on_map(request.pose)
-                and not self.planner.steering.free(request.pose.position, request.pose.yaw)):
+        if (
+            action == MOVE_FORWARD
+            and self.cfg.map_checked_forward
+            and self.planner.on_map(request.pose)
+            and not self.planner.steering.free(request.pose.position, request.pose.yaw)
+        ):
             # as when stuck: the geometric navigator drives `stuck_steps` steps (its detour, then the route)
             return self._geometric(observation, request, then=max(0, self.cfg.stuck_steps - 1))
         return action

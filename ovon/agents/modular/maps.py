@@ -150,9 +150,7 @@ class AgentMaps:
         cap = rr.size * int((ring == 0).sum()) + 1
         out_r = np.empty(cap, dtype=np.int32)
         out_c = np.empty(cap, dtype=np.int32)
-        m = _add_obstacles(
-            self.obstacle, self.navigable, self.penalty, rr, cc, off_r, off_c, ring, out_r, out_c
-        )
+        m = _add_obstacles(self.obstacle, self.navigable, self.penalty, rr, cc, off_r, off_c, ring, out_r, out_c)
         if m:
             self.frontier_map.update_navigability(out_r[:m], out_c[:m])
         return int(rr.size)

@@ -178,8 +178,21 @@ class GeometricNavigator:
         while True:
             self._stamp_id += 1
             best = frontier_search(
-                m.navigable, r, c, tr, tc, self._tidx, zeros, 1.0, self._dist, self._parent, self._stamp,
-                self._stamp_id, self._bcell, self._bg, m.penalty,
+                m.navigable,
+                r,
+                c,
+                tr,
+                tc,
+                self._tidx,
+                zeros,
+                1.0,
+                self._dist,
+                self._parent,
+                self._stamp,
+                self._stamp_id,
+                self._bcell,
+                self._bg,
+                m.penalty,
             )
             if best != -2:
                 break
@@ -267,8 +280,10 @@ class GeometricNavigator:
         return self.steering.act(pose.position, pose.yaw, err)
 
 
-NAVIGATORS: dict[str, str] = {"geometric": "ovon.agents.modular.navigation:GeometricNavigator",
-                              "learned": "ovon.agents.modular.learned_navigator:LearnedNavigator"}
+NAVIGATORS: dict[str, str] = {
+    "geometric": "ovon.agents.modular.navigation:GeometricNavigator",
+    "learned": "ovon.agents.modular.learned_navigator:LearnedNavigator",
+}
 
 
 def make_navigator(cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors) -> PointGoalNavigator:

@@ -75,9 +75,7 @@ class DepthProjector:
             self._key = (h, w)
         return self._u, self._v
 
-    def project(
-        self, depth: np.ndarray, pose: Pose2D, pitch: float, rows: np.ndarray, cols: np.ndarray
-    ) -> np.ndarray:
+    def project(self, depth: np.ndarray, pose: Pose2D, pitch: float, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """(N, 3) float32 points [x, height above floor, z] of the given pixels."""
         u, v = self._rays(*depth.shape)
         d = depth[rows, cols].astype(np.float32)

@@ -28,10 +28,12 @@ def load_owlv2(name_or_path: str, device: str = "cpu") -> tuple[Any, Any, Any]:
         return Owlv2ForObjectDetection, Owlv2ImageProcessorPil, AutoTokenizer
 
     def missing(e: Exception) -> str:
-        return (f"OWLv2 model {name_or_path!r} is not available locally ({type(e).__name__}); weights are never "
-                f"downloaded at run time: on a machine with internet run `hf download {name_or_path}` and copy "
-                f"~/.cache/huggingface here (or set HF_HOME), or set detector.owlv2_model to a save_pretrained "
-                f"folder; without weights use detector.kind=oracle (oracle detection)")
+        return (
+            f"OWLv2 model {name_or_path!r} is not available locally ({type(e).__name__}); weights are never "
+            f"downloaded at run time: on a machine with internet run `hf download {name_or_path}` and copy "
+            f"~/.cache/huggingface here (or set HF_HOME), or set detector.owlv2_model to a save_pretrained "
+            f"folder; without weights use detector.kind=oracle (oracle detection)"
+        )
 
     return load_pretrained("owlv2", name_or_path, device, classes, missing)
 
@@ -54,7 +56,10 @@ class OWLv2Detector:
         if goal not in self._text_cache:
             tok = self.tokenizer(
                 [self.cfg.owlv2_prompt.format(goal=goal)],
-                padding="max_length", truncation=True, max_length=self.max_text, return_tensors="pt",
+                padding="max_length",
+                truncation=True,
+                max_length=self.max_text,
+                return_tensors="pt",
             )
             self._text_cache[goal] = {k: v.to(self.cfg.device) for k, v in tok.items()}
         return self._text_cache[goal]
@@ -70,7 +75,8 @@ class OWLv2Detector:
         pixels = self.processor(images=[Image.fromarray(rgb)], return_tensors="pt")["pixel_values"]
         text = self._text_inputs(goal_text)
         out = self.model(
-            input_ids=text["input_ids"], attention_mask=text["attention_mask"],
+            input_ids=text["input_ids"],
+            attention_mask=text["attention_mask"],
             pixel_values=pixels.to(self.cfg.device),
         )
         res = self.processor.post_process_object_detection(

@@ -81,8 +81,10 @@ def encode_observation(encoder: ImageEncoder, obs: dict, semantic: Any = None) -
     `semantic` (H, W) instance ids is the privileged frame, needed by the oracle encoder only."""
     if semantic is not None and hasattr(encoder, "encode_one"):  # the oracle: no batch of one to build
         return encoder.encode_one(semantic, obs.get("depth"), int(obs.get("collided", 0)))
-    batch: dict[str, Any] = {"depth": np.asarray(obs["depth"])[None],
-                             "collided": np.array([int(obs.get("collided", 0))])}
+    batch: dict[str, Any] = {
+        "depth": np.asarray(obs["depth"])[None],
+        "collided": np.array([int(obs.get("collided", 0))]),
+    }
     if "rgb" in obs:
         batch["rgb"] = np.asarray(obs["rgb"])[None]
     if semantic is not None:

@@ -11,8 +11,19 @@ from typing import Any
 # visual mesh suffixes, in order of preference inside one folder (plain glb first: HM3D's glb release
 # has JPEG/PNG textures, cheaper to decode than the Basis ones of `.basis.glb`)
 MESH_SUFFIXES = (".glb", ".basis.glb", ".gltf", ".ply", ".obj")
-_SUFFIXES = (".semantic.glb", ".semantic.txt", ".ovon.json", ".stage_config.json", ".basis.navmesh", ".navmesh",
-             ".basis.glb", ".glb", ".gltf", ".ply", ".obj")
+_SUFFIXES = (
+    ".semantic.glb",
+    ".semantic.txt",
+    ".ovon.json",
+    ".stage_config.json",
+    ".basis.navmesh",
+    ".navmesh",
+    ".basis.glb",
+    ".glb",
+    ".gltf",
+    ".ply",
+    ".obj",
+)
 NAVMESH_SUFFIXES = (".navmesh", ".basis.navmesh")  # habitat's navmesh beside the mesh, in order of preference
 EXPECTED = "<id>.glb (or .basis.glb / .gltf / .ply / .obj), optionally <id>.semantic.glb + <id>.semantic.txt"
 
@@ -32,8 +43,7 @@ def _stem_of(path: Path) -> str:
 
 def _is_mesh(p: Path) -> bool:
     n = p.name.lower()
-    return (not p.name.startswith("._") and p.is_file() and n.endswith(MESH_SUFFIXES)
-            and not n.endswith(".semantic.glb"))
+    return not p.name.startswith("._") and p.is_file() and n.endswith(MESH_SUFFIXES) and not n.endswith(".semantic.glb")
 
 
 def find_scene_files(path: str | Path) -> dict[str, Any]:
@@ -45,8 +55,9 @@ def find_scene_files(path: str | Path) -> dict[str, Any]:
     """
     p = Path(path)
     if not p.exists():
-        raise FileNotFoundError(f"scene path {p} does not exist (expected a scene folder holding {EXPECTED}, "
-                                "or one of those files)")
+        raise FileNotFoundError(
+            f"scene path {p} does not exist (expected a scene folder holding {EXPECTED}, or one of those files)"
+        )
     visual: Path | None = None
     if p.is_dir():
         folder = p
@@ -70,8 +81,10 @@ def find_scene_files(path: str | Path) -> dict[str, Any]:
     if visual is None:
         visual = next((q for s in MESH_SUFFIXES if (q := opt(s)) is not None), None)
     if visual is None:
-        raise FileNotFoundError(f"scene {stem} in {folder}: no visual mesh {stem}.glb (or .basis.glb / .gltf / "
-                                f".ply / .obj) next to its other files")
+        raise FileNotFoundError(
+            f"scene {stem} in {folder}: no visual mesh {stem}.glb (or .basis.glb / .gltf / "
+            f".ply / .obj) next to its other files"
+        )
     scene_id = folder.name if folder.name.endswith(f"-{stem}") or folder.name == stem else stem
     return {
         "folder": folder,

@@ -34,13 +34,15 @@ def detect_floors(mesh: Mesh, bin_size: float = 0.1, min_area: float = 2.0) -> l
     chosen = height_peaks(y, w, bin_size, min_area, FLOOR_SEPARATION)
     faces_up = mesh.faces[up]
     top = float(mesh.vertices[:, 1].max())
-    kept = [h for h in chosen
-            if top - h > 0.5 or _covered_fraction(mesh, faces_up[np.abs(y - h) <= bin_size], h) >= 0.5]
+    kept = [
+        h for h in chosen if top - h > 0.5 or _covered_fraction(mesh, faces_up[np.abs(y - h) <= bin_size], h) >= 0.5
+    ]
     return sorted(kept or [min(chosen)])
 
 
-def height_peaks(y: np.ndarray, w: np.ndarray, bin_size: float = 0.1, min_area: float = 2.0,
-                 separation: float = FLOOR_SEPARATION) -> list[float]:
+def height_peaks(
+    y: np.ndarray, w: np.ndarray, bin_size: float = 0.1, min_area: float = 2.0, separation: float = FLOOR_SEPARATION
+) -> list[float]:
     """Heights of the big horizontal areas among surfaces at heights `y` with areas `w` (not sorted,
     largest first): an area-weighted histogram, peaks taken greedily by area (at least `min_area` and
     15% of the largest), each more than `separation` from the ones already taken; the largest single

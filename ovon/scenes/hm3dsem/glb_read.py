@@ -75,12 +75,14 @@ def _gltf_json(path: Path, data: bytes) -> dict:
             raise SceneFileError(path, "is not a glTF document (top level is not an object)")
         return doc
     what = "empty" if not data else f"starts with {data[:4]!r}"
-    raise SceneFileError(path, f"is not a GLB file ({what}, expected the magic b'glTF')",
-                         "is it a complete .glb? re-download or re-export it")
+    raise SceneFileError(
+        path,
+        f"is not a GLB file ({what}, expected the magic b'glTF')",
+        "is it a complete .glb? re-download or re-export it",
+    )
 
 
-def _glb_chunks(path: Path, size: int, read_at: Callable[[int, int], bytes],
-                want_bin: bool) -> tuple[dict, bytes, int]:
+def _glb_chunks(path: Path, size: int, read_at: Callable[[int, int], bytes], want_bin: bool) -> tuple[dict, bytes, int]:
     """(JSON document, BIN chunk or b"" unless `want_bin`, BIN chunk length) of a GLB of `size` bytes read
     through `read_at(offset, n)`: every length the header and chunk headers declare is checked against the
     file's size, so a truncated file is caught without reading its (large) BIN chunk."""
@@ -90,8 +92,11 @@ def _glb_chunks(path: Path, size: int, read_at: Callable[[int, int], bytes],
     if version != 2:
         raise SceneFileError(path, f"is glTF version {version}; only glTF 2.0 is supported")
     if total > size:
-        raise SceneFileError(path, f"is truncated: the header declares {total:,} bytes but the file has "
-                                   f"{size:,}", "re-download or re-export it")
+        raise SceneFileError(
+            path,
+            f"is truncated: the header declares {total:,} bytes but the file has {size:,}",
+            "re-download or re-export it",
+        )
     off = 12
     doc: dict | None = None
     binchunk = b""
@@ -99,8 +104,12 @@ def _glb_chunks(path: Path, size: int, read_at: Callable[[int, int], bytes],
     while off + 8 <= size:
         length, ctype = struct.unpack("<I4s", read_at(off, 8))
         if off + 8 + length > size:
-            raise SceneFileError(path, f"is truncated: chunk {ctype!r} at byte {off} declares {length:,} bytes, "
-                                       f"only {size - off - 8:,} follow", "re-download or re-export it")
+            raise SceneFileError(
+                path,
+                f"is truncated: chunk {ctype!r} at byte {off} declares {length:,} bytes, "
+                f"only {size - off - 8:,} follow",
+                "re-download or re-export it",
+            )
         if ctype == b"JSON":
             try:
                 doc = json.loads(read_at(off + 8, length).decode("utf-8"))
@@ -133,8 +142,11 @@ def _buffer_bytes(g: _Glb, index: int, cache: dict[int, bytes]) -> bytes:
     need = int(buf.get("byteLength", 0))
     if len(data) < need:
         src = "the BIN chunk" if uri is None else "a data URI" if uri.startswith("data:") else str(g.path.parent / uri)
-        raise SceneFileError(g.path, f"buffer {index} declares {need:,} bytes but {src} holds {len(data):,} "
-                                     "(truncated or corrupt)", "re-download or re-export it")
+        raise SceneFileError(
+            g.path,
+            f"buffer {index} declares {need:,} bytes but {src} holds {len(data):,} (truncated or corrupt)",
+            "re-download or re-export it",
+        )
     cache[index] = data
     return data
 
@@ -145,16 +157,22 @@ def _view_bytes(g: _Glb, view_index: int, cache: dict[int, bytes]) -> tuple[byte
     start = int(v.get("byteOffset", 0))
     length = int(v["byteLength"])
     if start < 0 or start + length > len(buf):
-        raise SceneFileError(g.path, f"bufferView {view_index} spans bytes {start:,}..{start + length:,} of buffer "
-                                     f"{v['buffer']}, which has {len(buf):,} (truncated or corrupt)")
+        raise SceneFileError(
+            g.path,
+            f"bufferView {view_index} spans bytes {start:,}..{start + length:,} of buffer "
+            f"{v['buffer']}, which has {len(buf):,} (truncated or corrupt)",
+        )
     return buf[start : start + length], int(v.get("byteStride", 0))
 
 
 def _accessor(g: _Glb, index: int, cache: dict[int, bytes]) -> np.ndarray:
     a = g.doc["accessors"][index]
     if a.get("componentType") not in _COMP or a.get("type") not in _NCOMP:
-        raise SceneFileError(g.path, f"accessor {index} has componentType {a.get('componentType')} / type "
-                                     f"{a.get('type')!r}, which glTF 2.0 does not define")
+        raise SceneFileError(
+            g.path,
+            f"accessor {index} has componentType {a.get('componentType')} / type "
+            f"{a.get('type')!r}, which glTF 2.0 does not define",
+        )
     dtype = np.dtype(_COMP[a["componentType"]])
     n = _NCOMP[a["type"]]
     count = int(a["count"])
@@ -167,8 +185,11 @@ def _accessor(g: _Glb, index: int, cache: dict[int, bytes]) -> np.ndarray:
         step = stride if stride else elem
         need = off + (step * (count - 1) + elem if count else 0)
         if need > len(raw):
-            raise SceneFileError(g.path, f"accessor {index} needs {need:,} bytes of bufferView {a['bufferView']} "
-                                         f"({count:,} x {a['type']}), which has {len(raw):,} (truncated or corrupt)")
+            raise SceneFileError(
+                g.path,
+                f"accessor {index} needs {need:,} bytes of bufferView {a['bufferView']} "
+                f"({count:,} x {a['type']}), which has {len(raw):,} (truncated or corrupt)",
+            )
         if stride and stride != elem:
             rows = np.frombuffer(raw, dtype=np.uint8, count=stride * (count - 1) + elem if count else 0, offset=off)
             rows = np.lib.stride_tricks.as_strided(rows, shape=(count, elem), strides=(stride, 1))
@@ -184,9 +205,12 @@ def _accessor(g: _Glb, index: int, cache: dict[int, bytes]) -> np.ndarray:
         k = int(sp["count"])
         ict = sp["indices"]["componentType"]
         if ict not in _INDEX_COMP:
-            raise SceneFileError(g.path, f"sparse accessor {index} has indices of componentType {ict} "
-                                         f"({_COMP_NAME.get(ict, 'unknown')}), expected one of {sorted(_INDEX_COMP)}",
-                                 "fix: re-export the mesh")
+            raise SceneFileError(
+                g.path,
+                f"sparse accessor {index} has indices of componentType {ict} "
+                f"({_COMP_NAME.get(ict, 'unknown')}), expected one of {sorted(_INDEX_COMP)}",
+                "fix: re-export the mesh",
+            )
         iraw, _ = _view_bytes(g, sp["indices"]["bufferView"], cache)
         idt = np.dtype(_COMP[ict])
         ioff = int(sp["indices"].get("byteOffset", 0))
@@ -251,8 +275,11 @@ def _node_vector(path: Path, ni: int, node: dict, key: str, default: list[float]
         v = np.empty(0)
     if v.shape != (len(default),) or not np.isfinite(v).all():
         what = f"{len(default)} finite numbers"
-        raise SceneFileError(path, f"{_node_name(ni, node)} has {key} {str(raw)[:80]}, expected {what}",
-                             "fix: repair the node transform or re-export the mesh")
+        raise SceneFileError(
+            path,
+            f"{_node_name(ni, node)} has {key} {str(raw)[:80]}, expected {what}",
+            "fix: repair the node transform or re-export the mesh",
+        )
     return v
 
 
@@ -265,8 +292,11 @@ def _node_matrix(node: dict, path: Path = Path("?"), ni: int = -1) -> np.ndarray
     q = _node_vector(path, ni, node, "rotation", [0.0, 0.0, 0.0, 1.0])
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > 1e-2:  # exporters round quaternions a little: renormalised below
-        raise SceneFileError(path, f"{_node_name(ni, node)} has rotation {q.tolist()} of length {norm:.4g}, expected "
-                                   "a unit quaternion", "fix: repair the node transform or re-export the mesh")
+        raise SceneFileError(
+            path,
+            f"{_node_name(ni, node)} has rotation {q.tolist()} of length {norm:.4g}, expected a unit quaternion",
+            "fix: repair the node transform or re-export the mesh",
+        )
     x, y, z, w = (float(v) for v in q / norm)
     s = _node_vector(path, ni, node, "scale", [1.0, 1.0, 1.0])
     r = np.array(
@@ -287,8 +317,11 @@ def _check_world(path: Path, ni: int, node: dict, world: np.ndarray) -> bool:
     scale: exporters hide nodes that way, and glTF allows it), an error when it is not finite (overflow of
     huge scales)."""
     if not np.isfinite(world).all():
-        raise SceneFileError(path, f"{_node_name(ni, node)}: its world transform (with its parents') is not finite",
-                             "fix: repair the node transforms or re-export the mesh")
+        raise SceneFileError(
+            path,
+            f"{_node_name(ni, node)}: its world transform (with its parents') is not finite",
+            "fix: repair the node transforms or re-export the mesh",
+        )
     sv = np.linalg.svd(world[:3, :3], compute_uv=False)
     return not (sv[0] == 0.0 or sv[-1] < _SINGULAR_RATIO * sv[0])
 
@@ -324,10 +357,13 @@ def _node_order(doc: dict, path: Path = Path("?"), notes: list[str] | None = Non
     if hidden:
         if not any(ni < 0 or nodes[ni].get("mesh") is not None for ni, _ in order):
             ni = hidden[0]
-            raise SceneFileError(path, f"every node with a mesh has a singular transform (with its parents'), e.g. "
-                                       f"{_node_name(ni, nodes[ni])}: it flattens the scene to a plane, line or "
-                                       "point", "fix: give the nodes invertible matrices / non-zero scales, or "
-                                       "re-export the mesh")
+            raise SceneFileError(
+                path,
+                f"every node with a mesh has a singular transform (with its parents'), e.g. "
+                f"{_node_name(ni, nodes[ni])}: it flattens the scene to a plane, line or "
+                "point",
+                "fix: give the nodes invertible matrices / non-zero scales, or re-export the mesh",
+            )
         if notes is not None:
             shown = ", ".join(_node_name(ni, nodes[ni]) for ni in hidden[:3]) + (", ..." if len(hidden) > 3 else "")
             notes.append(f"skipped {len(hidden)} node(s) with a singular (zero-scale: hidden) transform: {shown}")
@@ -387,13 +423,18 @@ def _check_index_type(path: Path, doc: dict, prim: dict, where: str) -> None:
     ct = iacc.get("componentType")
     if ct not in _INDEX_COMP or iacc.get("type") != "SCALAR":
         allowed = ", ".join(f"{k} ({v})" for k, v in _INDEX_COMP.items())
-        raise SceneFileError(path, f"{where}: its indices (accessor {prim['indices']}) are {iacc.get('type')} "
-                                   f"of componentType {ct} ({_COMP_NAME.get(ct, 'unknown')}), expected SCALAR "
-                                   f"of {allowed}", "fix: re-export the mesh")
+        raise SceneFileError(
+            path,
+            f"{where}: its indices (accessor {prim['indices']}) are {iacc.get('type')} "
+            f"of componentType {ct} ({_COMP_NAME.get(ct, 'unknown')}), expected SCALAR "
+            f"of {allowed}",
+            "fix: re-export the mesh",
+        )
 
 
-def _read_primitive(g: _Glb, prim: dict, world: np.ndarray, where: str, cache: dict[int, bytes],
-                    notes: list[str]) -> _Primitive | None:
+def _read_primitive(
+    g: _Glb, prim: dict, world: np.ndarray, where: str, cache: dict[int, bytes], notes: list[str]
+) -> _Primitive | None:
     doc = g.doc
     mode = prim.get("mode", 4)
     attrs = prim["attributes"]
@@ -408,15 +449,21 @@ def _read_primitive(g: _Glb, prim: dict, world: np.ndarray, where: str, cache: d
         raise SceneFileError(g.path, f"{where}: POSITION is {pos_acc.get('type')}, expected VEC3")
     bad = ~np.isfinite(pos).all(axis=1)
     if bad.any():
-        raise SceneFileError(g.path, f"{where}: {int(bad.sum()):,} of {len(pos):,} vertex positions are NaN or "
-                                     f"infinite (first: vertex {int(np.flatnonzero(bad)[0])})",
-                             "repair or re-export the mesh")
+        raise SceneFileError(
+            g.path,
+            f"{where}: {int(bad.sum()):,} of {len(pos):,} vertex positions are NaN or "
+            f"infinite (first: vertex {int(np.flatnonzero(bad)[0])})",
+            "repair or re-export the mesh",
+        )
     if "indices" in prim:
         _check_index_type(g.path, doc, prim, where)
         idx = _accessor(g, prim["indices"], cache).reshape(-1).astype(np.int64)
         if len(idx) and (idx.max() >= len(pos) or idx.min() < 0):
-            raise SceneFileError(g.path, f"{where}: triangle index {int(idx.max())} is out of range: the primitive "
-                                         f"has {len(pos):,} vertices", "the file is corrupt; re-export it")
+            raise SceneFileError(
+                g.path,
+                f"{where}: triangle index {int(idx.max())} is out of range: the primitive has {len(pos):,} vertices",
+                "the file is corrupt; re-export it",
+            )
     else:
         idx = np.arange(len(pos), dtype=np.int64)
     tris = _triangles(idx, mode)
@@ -425,9 +472,12 @@ def _read_primitive(g: _Glb, prim: dict, world: np.ndarray, where: str, cache: d
             pos = (pos.astype(np.float64) @ world[:3, :3].T + world[:3, 3]).astype(np.float32)
         bad = ~np.isfinite(pos).all(axis=1)
         if bad.any():  # finite vertices and transform, yet beyond float32 once transformed (a huge scale)
-            raise SceneFileError(g.path, f"{where}: {int(bad.sum()):,} of {len(pos):,} vertex positions overflow "
-                                         "to infinity once its node transform is applied",
-                                 "fix: repair the node transform or re-export the mesh")
+            raise SceneFileError(
+                g.path,
+                f"{where}: {int(bad.sum()):,} of {len(pos):,} vertex positions overflow "
+                "to infinity once its node transform is applied",
+                "fix: repair the node transform or re-export the mesh",
+            )
         if np.linalg.det(world[:3, :3]) < 0:
             tris = tris[:, [0, 2, 1]]
     p = _Primitive(positions=pos, indices=tris)
@@ -531,21 +581,28 @@ def _preflight_doc(path: Path, doc: dict, binlen: int) -> tuple[np.ndarray, np.n
             else:
                 ext = path.parent / uri
                 if not ext.is_file():
-                    raise FileNotFoundError(f"{path}: external buffer {ext} is missing (a .gltf needs its .bin "
-                                            "beside it)")
+                    raise FileNotFoundError(
+                        f"{path}: external buffer {ext} is missing (a .gltf needs its .bin beside it)"
+                    )
                 have, src = ext.stat().st_size, str(ext)
             need = int(buf.get("byteLength", 0))
             if have < need:
-                raise SceneFileError(path, f"buffer {i} declares {need:,} bytes but {src} holds {have:,} "
-                                           "(truncated or corrupt)", "re-download or re-export it")
+                raise SceneFileError(
+                    path,
+                    f"buffer {i} declares {need:,} bytes but {src} holds {have:,} (truncated or corrupt)",
+                    "re-download or re-export it",
+                )
             buf_have[i] = have
         return buf_have[i]
 
     def check_accessor(i: int) -> None:
         a = accessors[i]
         if a.get("componentType") not in _COMP or a.get("type") not in _NCOMP:
-            raise SceneFileError(path, f"accessor {i} has componentType {a.get('componentType')} / type "
-                                       f"{a.get('type')!r}, which glTF 2.0 does not define")
+            raise SceneFileError(
+                path,
+                f"accessor {i} has componentType {a.get('componentType')} / type "
+                f"{a.get('type')!r}, which glTF 2.0 does not define",
+            )
         if "bufferView" not in a:
             return
         vi = a["bufferView"]
@@ -553,15 +610,21 @@ def _preflight_doc(path: Path, doc: dict, binlen: int) -> tuple[np.ndarray, np.n
         have = buffer_size(v["buffer"])
         start, length = int(v.get("byteOffset", 0)), int(v["byteLength"])
         if start < 0 or start + length > have:
-            raise SceneFileError(path, f"bufferView {vi} spans bytes {start:,}..{start + length:,} of buffer "
-                                       f"{v['buffer']}, which has {have:,} (truncated or corrupt)")
+            raise SceneFileError(
+                path,
+                f"bufferView {vi} spans bytes {start:,}..{start + length:,} of buffer "
+                f"{v['buffer']}, which has {have:,} (truncated or corrupt)",
+            )
         elem = np.dtype(_COMP[a["componentType"]]).itemsize * _NCOMP[a["type"]]
         count = int(a["count"])
         step = int(v.get("byteStride", 0)) or elem
         need = int(a.get("byteOffset", 0)) + (step * (count - 1) + elem if count > 0 else 0)
         if need > length:
-            raise SceneFileError(path, f"accessor {i} needs {need:,} bytes of bufferView {vi} ({count:,} x "
-                                       f"{a['type']}), which has {length:,} (truncated or corrupt)")
+            raise SceneFileError(
+                path,
+                f"accessor {i} needs {need:,} bytes of bufferView {vi} ({count:,} x "
+                f"{a['type']}), which has {length:,} (truncated or corrupt)",
+            )
 
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     exact = True

@@ -72,8 +72,11 @@ def check_scene_span(mesh: Mesh, path: Path) -> None:
 
 
 def _span_error(path: Path, span: np.ndarray) -> SceneFileError:
-    hints = "; ".join(f"read as {unit}: {span[0] / k:,.1f} x {span[1] / k:,.1f} m"
-                      for unit, k in (("mm", 1000.0), ("cm", 100.0)) if span.max() / k <= MAX_SCENE_SPAN_M)
+    hints = "; ".join(
+        f"read as {unit}: {span[0] / k:,.1f} x {span[1] / k:,.1f} m"
+        for unit, k in (("mm", 1000.0), ("cm", 100.0))
+        if span.max() / k <= MAX_SCENE_SPAN_M
+    )
     return SceneFileError(
         path,
         f"spans {span[0]:,.0f} x {span[1]:,.0f} m horizontally (x by z), more than any building (max "
@@ -228,11 +231,13 @@ def _load_ours(files: dict, vocab: Any) -> tuple[Scene, Notes]:
     order = {e.id: i for i, e in enumerate(entries)}
     scene.objects.sort(key=lambda o: order[o.id])
     if mismatched:
-        notes.append((
-            files["sidecar"],
-            f"{len(mismatched)} objects clean to a different category than the sidecar records "
-            f"(vocabulary changed?), e.g. {mismatched[:3]}; the cleaned one is used",
-        ))
+        notes.append(
+            (
+                files["sidecar"],
+                f"{len(mismatched)} objects clean to a different category than the sidecar records "
+                f"(vocabulary changed?), e.g. {mismatched[:3]}; the cleaned one is used",
+            )
+        )
     scene.regions = [
         Region(int(r["id"]), r["name"], int(r["floor"]), None if r["bounds"] is None else tuple(r["bounds"]))
         for r in side.get("regions", [])
@@ -307,20 +312,24 @@ def _semantic(
     color_to_id, shadowed = shadowed_entries(entries)
     if shadowed:
         e, first = shadowed[0]
-        notes.append((
-            files["semantic_txt"],
-            f"{len(shadowed)} instance(s) share a colour with an earlier line, e.g. instance {e.id} "
-            f"({e.raw_label!r}, colour {_hex(e.color)}) with instance {first}: the earlier one keeps the faces of "
-            "that colour (as habitat-sim reads it), these have none and are left out",
-        ))
+        notes.append(
+            (
+                files["semantic_txt"],
+                f"{len(shadowed)} instance(s) share a colour with an earlier line, e.g. instance {e.id} "
+                f"({e.raw_label!r}, colour {_hex(e.color)}) with instance {first}: the earlier one keeps the faces of "
+                "that colour (as habitat-sim reads it), these have none and are left out",
+            )
+        )
     face_rgb, _how = _semantic_face_colors(sem_prims)
     face_ids, unknown, missing = _decode_face_ids(face_rgb, color_to_id)
     if unknown:
-        notes.append((
-            files["semantic"],
-            f"{unknown} semantic faces have colours missing from {files['semantic_txt'].name} "
-            f"({len(missing)} colours, e.g. {sorted(_hex(c) for c in missing)[:5]}); assigned id 0",
-        ))
+        notes.append(
+            (
+                files["semantic"],
+                f"{unknown} semantic faces have colours missing from {files['semantic_txt'].name} "
+                f"({len(missing)} colours, e.g. {sorted(_hex(c) for c in missing)[:5]}); assigned id 0",
+            )
+        )
     sem_mesh, n4 = _combine(sem_prims, "semantic", files["semantic"])
     notes += [(files["semantic"], n) for n in n4]
     rotate_mesh(sem_mesh, rot)
@@ -369,8 +378,13 @@ def _objects_from_faces(
             region_id=e.region_id, region_name=rname, floor=scene.floor_of_height(float(lo[1])), color=e.color,
         ))  # fmt: skip
     if no_faces:
-        return [(txt, f"{len(no_faces)} annotated instances have no faces in the semantic mesh and were skipped "
-                      f"(ids {no_faces[:10]})")]
+        return [
+            (
+                txt,
+                f"{len(no_faces)} annotated instances have no faces in the semantic mesh and were skipped "
+                f"(ids {no_faces[:10]})",
+            )
+        ]
     return []
 
 

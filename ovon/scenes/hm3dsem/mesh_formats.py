@@ -42,8 +42,11 @@ def _read_trimesh(path: Path, fmt: str) -> tuple[list[_Primitive], list[str]]:
     try:
         loaded = trimesh.load(str(path), process=False, maintain_order=True)
     except Exception as e:  # trimesh raises many types for broken files
-        raise SceneFileError(path, f"could not be read as {fmt} ({type(e).__name__}: {str(e)[:120]})",
-                             "is the file complete? re-export it") from None
+        raise SceneFileError(
+            path,
+            f"could not be read as {fmt} ({type(e).__name__}: {str(e)[:120]})",
+            "is the file complete? re-export it",
+        ) from None
     geoms = list(loaded.dump()) if isinstance(loaded, trimesh.Scene) else [loaded]
     notes: list[str] = []
     prims = []
@@ -60,8 +63,11 @@ def _primitive(path: Path, g) -> _Primitive:  # noqa: ANN001 (trimesh.Trimesh)
     faces = np.asarray(g.faces, dtype=np.int64)
     bad = ~np.isfinite(pos).all(axis=1)
     if bad.any():
-        raise SceneFileError(path, f"{int(bad.sum()):,} of {len(pos):,} vertex positions are NaN or infinite",
-                             "repair or re-export the mesh")
+        raise SceneFileError(
+            path,
+            f"{int(bad.sum()):,} of {len(pos):,} vertex positions are NaN or infinite",
+            "repair or re-export the mesh",
+        )
     if len(faces) and (faces.min() < 0 or faces.max() >= len(pos)):
         raise SceneFileError(path, f"face index {int(faces.max())} is out of range: the mesh has {len(pos):,} vertices")
     p = _Primitive(positions=pos, indices=faces)

@@ -49,10 +49,11 @@ def _decode(path: Path, data: bytes) -> str:
     Such a label may no longer match the vocabulary, so the warning names the file and lines to re-save.
     """
     if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
-        raise SceneFileError(path, "is UTF-16 text, not UTF-8",
-                             "fix: re-save it as UTF-8 (e.g. `iconv -f UTF-16 -t UTF-8`)")
+        raise SceneFileError(
+            path, "is UTF-16 text, not UTF-8", "fix: re-save it as UTF-8 (e.g. `iconv -f UTF-16 -t UTF-8`)"
+        )
     if data.startswith(codecs.BOM_UTF8):
-        data = data[len(codecs.BOM_UTF8):]
+        data = data[len(codecs.BOM_UTF8) :]
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
@@ -69,7 +70,8 @@ def _decode(path: Path, data: bytes) -> str:
     warnings.warn(
         f"{path}: line(s) {', '.join(map(str, bad[:5]))}{more} hold bytes that are not UTF-8 (shown as U+FFFD in "
         "their labels, which may then miss the vocabulary); fix: re-save the file as UTF-8",
-        SceneLoadWarning, stacklevel=2,  # one location: shown once however many callers parse the file
+        SceneLoadWarning,
+        stacklevel=2,  # one location: shown once however many callers parse the file
     )
     return "\n".join(lines)
 
@@ -83,8 +85,11 @@ def parse_semantic_txt(path: Path) -> list[SemanticEntry]:
     """
     data = read_bytes(path)
     if b"\x00" in data[:4096] and not data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
-        raise SceneFileError(path, "is binary, not an HM3DSem semantic.txt",
-                             f"expected a first line '{SEMANTIC_HEADER}', then {SEMANTIC_LINE_FORMAT} per instance")
+        raise SceneFileError(
+            path,
+            "is binary, not an HM3DSem semantic.txt",
+            f"expected a first line '{SEMANTIC_HEADER}', then {SEMANTIC_LINE_FORMAT} per instance",
+        )
     text = _decode(path, data)
     entries: list[SemanticEntry] = []
     seen: dict[int, int] = {}
@@ -96,20 +101,30 @@ def parse_semantic_txt(path: Path) -> list[SemanticEntry]:
         m = _LINE_RE.match(line)
         if m is None:
             raise SceneFileError(
-                f"{path}:{lineno}", f"malformed line {line[:80]!r}",
+                f"{path}:{lineno}",
+                f"malformed line {line[:80]!r}",
                 f'expected {SEMANTIC_LINE_FORMAT} e.g. 1,9A9CAA,"wall",0',
             )
         iid, region = int(m.group(1)), int(m.group(4))
         if iid > INT32_MAX:
-            raise SceneFileError(f"{path}:{lineno}", f"instance id {iid} is too large (ids must be 0..{INT32_MAX})",
-                                 "fix: renumber the instances below 2**31 (the semantic mesh holds colours, not "
-                                 "ids: it needs no change)")
+            raise SceneFileError(
+                f"{path}:{lineno}",
+                f"instance id {iid} is too large (ids must be 0..{INT32_MAX})",
+                "fix: renumber the instances below 2**31 (the semantic mesh holds colours, not "
+                "ids: it needs no change)",
+            )
         if not INT32_MIN <= region <= INT32_MAX:
-            raise SceneFileError(f"{path}:{lineno}", f"region id {region} is out of range "
-                                 f"({INT32_MIN}..{INT32_MAX}; -1 means no region)", "fix: renumber the regions")
+            raise SceneFileError(
+                f"{path}:{lineno}",
+                f"region id {region} is out of range ({INT32_MIN}..{INT32_MAX}; -1 means no region)",
+                "fix: renumber the regions",
+            )
         if iid in seen:
-            raise SceneFileError(f"{path}:{lineno}", f"instance id {iid} already defined on line {seen[iid]}",
-                                 "fix: give every instance its own id")
+            raise SceneFileError(
+                f"{path}:{lineno}",
+                f"instance id {iid} already defined on line {seen[iid]}",
+                "fix: give every instance its own id",
+            )
         seen[iid] = lineno
         h = m.group(2)
         color = (int(h[0:2], 16), int(h[2:4], 16), int(h[4:6], 16))

@@ -97,6 +97,8 @@ def read_sidecar(path: Path) -> dict:
             except (TypeError, ValueError):
                 a = np.zeros(0)
             if a.shape != shape or not np.isfinite(a).all():
-                raise bad(f"object {key}: {name!r} must be {len(shape) == 2 and '3x3' or '3'} finite numbers, "
-                          f"got {str(rec[name])[:60]}")
+                raise bad(
+                    f"object {key}: {name!r} must be {len(shape) == 2 and '3x3' or '3'} finite numbers, "
+                    f"got {str(rec[name])[:60]}"
+                )
     return doc

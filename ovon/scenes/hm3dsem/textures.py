@@ -31,8 +31,9 @@ def decode_basis(data: bytes) -> np.ndarray:
     try:
         import opengl_basisu
     except ImportError:
-        raise TextureError("Basis/KTX2 texture and the decoder `opengl_basisu` is not installed "
-                           "(pip install opengl_basisu)") from None
+        raise TextureError(
+            "Basis/KTX2 texture and the decoder `opengl_basisu` is not installed (pip install opengl_basisu)"
+        ) from None
     try:
         tex = opengl_basisu.open(bytes(data))
         img = tex.transcode(opengl_basisu.Target.RGBA8)

@@ -57,8 +57,10 @@ def _vec(doc: dict, key: str, where: Path) -> np.ndarray | None:
 
 def configured_up(stage_config: Path | None, dataset_config: Path | None) -> tuple[np.ndarray, np.ndarray, str] | None:
     """(up, front, source) from habitat's configs, or None when they say nothing."""
-    for path, pick in ((stage_config, lambda d: d), (dataset_config,
-                                                       lambda d: (d.get("stages") or {}).get("default_attributes"))):
+    for path, pick in (
+        (stage_config, lambda d: d),
+        (dataset_config, lambda d: (d.get("stages") or {}).get("default_attributes")),
+    ):
         if path is None:
             continue
         try:
@@ -117,10 +119,14 @@ def rotation_warning(mesh: Mesh) -> str | None:
     axis = int(np.argmax(flat))
     if axis != 1 and flat[axis] > 1.2 * flat[1]:
         name = "xyz"[axis]
-        return (f"most flat area faces the {name} axis ({flat[axis]:.0f} m² vs {flat[1]:.0f} m² facing y): the scene "
-                f"looks rotated; if its up axis is {name}, pass --up {name} (or up=\"{name}\"), or add a "
-                "<id>.stage_config.json with \"up\"")
+        return (
+            f"most flat area faces the {name} axis ({flat[axis]:.0f} m² vs {flat[1]:.0f} m² facing y): the scene "
+            f'looks rotated; if its up axis is {name}, pass --up {name} (or up="{name}"), or add a '
+            '<id>.stage_config.json with "up"'
+        )
     if not (n[:, 1] > FLAT_COS).any() and flat[1] > 0:
-        return ("no horizontal face points up (all face down): the scene looks upside down or has inverted "
-                "winding; pass --up -y if it is upside down")
+        return (
+            "no horizontal face points up (all face down): the scene looks upside down or has inverted "
+            "winding; pass --up -y if it is upside down"
+        )
     return None
