@@ -375,7 +375,7 @@ def _units(cfg: EvalConfig, specs_by_split: dict[str, list[EpisodeSpec]], done: 
         for split, specs in specs_by_split.items():
             by_scene: dict[str, list[EpisodeSpec]] = {}
             for s in specs:
-                if (split, int(seed), s.scene, s.episode_id) not in done:
+                if (split, int(seed), s.scene_key, s.episode_id) not in done:
                     by_scene.setdefault(s.scene, []).append(s)
             for scene_specs in by_scene.values():
                 for i in range(0, len(scene_specs), chunk):
@@ -531,7 +531,7 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
             if is_remote(cfg.agent):
                 release_agent()  # in-process runs: the connection closes with the run
         wanted = {
-            (split, int(seed), s.scene, s.episode_id)
+            (split, int(seed), s.scene_key, s.episode_id)
             for seed in cfg.seeds
             for split, specs in p.specs.items()
             for s in specs

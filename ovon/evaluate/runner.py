@@ -12,7 +12,9 @@ from ovon.task.episode import EpisodeSpec
 
 
 def episode_seed(seed: int, split: str, episode_id: str, scene: str) -> int:
-    """Per-episode seed, stable across processes, so results do not depend on scheduling."""
+    """Per-episode seed, stable across processes, so results do not depend on scheduling. `scene` is the
+    dataset's scene id (`EpisodeSpec.scene_key`), never a resolved path, so they do not depend on where the
+    data lives either."""
     return zlib.crc32(f"{seed}|{split}|{scene}|{episode_id}".encode())
 
 
@@ -20,7 +22,7 @@ def episode_info(spec: EpisodeSpec, ep_seed: int, sim) -> dict:
     """What an agent's `reset` gets (also when `ovon video` replays an episode through the agent)."""
     return {
         "episode_id": spec.episode_id,
-        "scene_id": spec.scene,
+        "scene_id": spec.scene_key,
         "split": spec.split,
         "goal": spec.goal_category,
         "seed": ep_seed,
@@ -37,7 +39,7 @@ class EpisodeRun:
 
     def __init__(self, env, spec: EpisodeSpec, seed: int, privileged: bool, record_path: bool = False) -> None:
         self.env, self.spec, self.seed, self.privileged = env, spec, seed, privileged
-        ep_seed = episode_seed(seed, spec.split, spec.episode_id, spec.scene)
+        ep_seed = episode_seed(seed, spec.split, spec.episode_id, spec.scene_key)
         self._obs, self._info = env.reset(seed=ep_seed, options={"episode": spec})
         self.truth = env.unwrapped  # the harness's own bookkeeping (paths for videos) may read ground truth
         self.info = episode_info(spec, ep_seed, self.truth.sim_cfg)
@@ -68,7 +70,7 @@ class EpisodeRun:
     def record(self) -> dict:
         spec, m = self.spec, self._info["metrics"]
         record = {
-            "scene": spec.scene,
+            "scene": spec.scene_key,
             "episode_id": spec.episode_id,
             "category": spec.goal_category,
             "split": spec.split,

@@ -227,14 +227,14 @@ def render_video(
     specs = [
         s
         for s in load_specs(meta["data"], meta["scenes"], rec["split"], None)
-        if s.episode_id == str(episode_id) and s.scene == rec["scene"]
+        if s.episode_id == str(episode_id) and s.scene_key == rec["scene"]
     ]
     if not specs:
         raise KeyError(f"episode {episode_id!r} of {rec['scene']} not found in {meta['data']}/{rec['split']}")
     spec = specs[0]
     sim = from_dict(SimConfig, meta["sim"])
     env = make_objectnav(episodes=[spec], sim=sim, task=from_dict(TaskConfig, meta["task"]), privileged=True)
-    ep_seed = episode_seed(rec["seed"], spec.split, spec.episode_id, spec.scene)
+    ep_seed = episode_seed(rec["seed"], spec.split, spec.episode_id, spec.scene_key)
     obs, info = env.reset(seed=ep_seed, options={"episode": spec})
     p = info["privileged"]
     goals = [(np.asarray(o.aabb_min), np.asarray(o.aabb_max)) for o in p.world.scene.objects if o.id in p.goal_ids]

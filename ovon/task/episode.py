@@ -31,6 +31,14 @@ class EpisodeSpec:
     viewpoints: list[GoalViewpoint] = field(default_factory=list)  # empty: navigable cells near goals
     split: str = ""
     info: dict = field(default_factory=dict)
+    # The dataset's own scene id, as written in the episode file ("" for ad-hoc episodes). Seeds and records
+    # use it instead of `scene`, a resolved path, so results do not depend on where the data lives.
+    scene_id: str = ""
+
+    @property
+    def scene_key(self) -> str:
+        """The scene as seeds and records name it: the dataset's id, or `scene` for ad-hoc episodes."""
+        return self.scene_id or self.scene
 
     @property
     def goal_categories(self) -> list[str]:
@@ -56,4 +64,5 @@ def spec_from_episode(episode, goals, scene_path: str, split: str = "") -> Episo
         viewpoints=viewpoints,
         split=split,
         info=dict(episode.info or {}),
+        scene_id=str(episode.scene_id),
     )
