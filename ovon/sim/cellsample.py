@@ -1,13 +1,13 @@
 """Triangles sampled at the cell centres of an xz grid: the one rasteriser behind grids computed from a
 mesh (`ovon.sim.navgrid`) and grids read from a habitat navmesh (`ovon.sim.navmesh.raster`), so both
-decide in the same way which cells a triangle covers and at what height.
+decide in the same way which cells a triangle covers, at what height, and which sample is a floor's surface.
 
 A cell centre is sampled by a triangle when it lies in the triangle's xz projection (barycentric test
 with a small tolerance, so a centre on a shared edge is sampled by both triangles); the sample is the
 triangle's height there, what a vertical ray through the centre hits. Samples come back per cell (CSR:
-`ptr`, then heights and triangle indices, in triangle order within a cell) and each caller reduces them
-its own way: navgrid keeps them all (floor candidates and clearance), the navmesh keeps the lowest per
-floor band.
+`ptr`, then heights and triangle indices), sorted by height within a cell (ties in triangle order).
+`band_surface` picks each cell's floor sample within a height band: navgrid the top of the lowest stack
+of free candidates (and the lowest candidate), the navmesh the lowest sample.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ _EPS_BARY = 1e-7
 @dataclass
 class CellSamples:
     ptr: np.ndarray  # int64 (cells + 1,): the samples of cell r * cols + c are [ptr[cell], ptr[cell + 1])
-    ys: np.ndarray  # float64 (samples,): height of each sample
+    ys: np.ndarray  # float64 (samples,): height of each sample, ascending within a cell
     tri: np.ndarray  # int32 (samples,): the triangle (row of F) each sample lies on
 
 
@@ -80,6 +80,24 @@ def _sample_pass(V, F, ox, oz, cs, rows, cols, vertical_tol, area_tol, fill, cou
                 counts[cell] += 1
 
 
+@njit(cache=True)
+def _sort_cells(ptr, ys, tri):  # noqa: ANN001
+    """Sort each cell's samples by height (stable insertion sort: a cell holds a handful)."""
+    for cell in range(ptr.shape[0] - 1):
+        s0 = ptr[cell]
+        s1 = ptr[cell + 1]
+        for i in range(s0 + 1, s1):
+            y = ys[i]
+            t = tri[i]
+            j = i - 1
+            while j >= s0 and ys[j] > y:
+                ys[j + 1] = ys[j]
+                tri[j + 1] = tri[j]
+                j -= 1
+            ys[j + 1] = y
+            tri[j + 1] = t
+
+
 def cell_samples(
     V: np.ndarray,
     F: np.ndarray,
@@ -91,9 +109,9 @@ def cell_samples(
     area_tol: float = 0.0,
 ) -> CellSamples:
     """Every (cell centre, triangle) hit of the triangles `V[F]` on the grid with cell (0, 0)'s corner at
-    `origin` (world x, z). Triangles are skipped when degenerate (normal shorter than 1e-12), when
-    |normal_y| < `vertical_tol` * |normal| (nearly vertical) or when twice their xz area is below
-    `area_tol`."""
+    `origin` (world x, z), sorted by height within a cell (ties in triangle order). Triangles are skipped
+    when degenerate (normal shorter than 1e-12), when |normal_y| < `vertical_tol` * |normal| (nearly
+    vertical) or when twice their xz area is below `area_tol`."""
     ncell = rows * cols
     counts = np.zeros(ncell, dtype=np.int64)
     ptr = np.zeros(ncell + 1, dtype=np.int64)
@@ -105,7 +123,36 @@ def cell_samples(
     tri = np.empty(int(ptr[-1]), dtype=np.int32)
     counts[:] = 0
     _sample_pass(*args, True, counts, ptr, ys, tri)
+    _sort_cells(ptr, ys, tri)
     return CellSamples(ptr, ys, tri)
+
+
+@njit(cache=True)
+def _band_surface(ptr, ys, mask, lo, hi, climb, out):  # noqa: ANN001
+    for cell in range(ptr.shape[0] - 1):
+        for k in range(ptr[cell], ptr[cell + 1]):
+            y = ys[k]
+            if mask[k] and y >= lo and y < hi:
+                if out[cell] < 0 or y <= ys[out[cell]] + climb + 1e-5:
+                    out[cell] = k
+
+
+def band_surface(s: CellSamples, mask: np.ndarray, lo: float, hi: float, climb: float = -math.inf) -> np.ndarray:
+    """(cells,) index of each cell's surface sample among the `mask` samples with lo <= y < hi, -1 where
+    none: the top of the lowest stack (each sample within `climb` + 1e-5 of the one below it, e.g. a floor
+    and a low step box lying on it), or with `climb` = -inf the lowest sample (the first in triangle order
+    on a tie)."""
+    out = np.full(len(s.ptr) - 1, -1, dtype=np.int64)
+    _band_surface(s.ptr, s.ys, mask, float(lo), float(hi), float(climb), out)
+    return out
+
+
+def pick(values: np.ndarray, k: np.ndarray, fill: float | int) -> np.ndarray:
+    """values[k] where k >= 0, `fill` where k is -1 (`band_surface`'s "no sample")."""
+    out = np.full(k.shape, fill, dtype=values.dtype)
+    ok = k >= 0
+    out[ok] = values[k[ok]]
+    return out
 
 
 @njit(cache=True)

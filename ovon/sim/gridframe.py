@@ -1,6 +1,6 @@
-"""The xz frame and the floor bands of navigability grids, shared by grids computed from a mesh
-(`ovon.sim.navgrid`) and grids read from a habitat navmesh (`ovon.sim.navmesh.raster`), so both put
-cell centres and floors in the same places."""
+"""The xz frame, the floor bands and the step cut of navigability grids, shared by grids computed from a
+mesh (`ovon.sim.navgrid`) and grids read from a habitat navmesh (`ovon.sim.navmesh.raster`), so both put
+cell centres and floors in the same places and cut ledges alike."""
 
 from __future__ import annotations
 
@@ -53,3 +53,21 @@ def grid_frame(V: np.ndarray, cs: float) -> tuple[np.ndarray, int, int]:
         )
     cols, rows = int(cols_f), int(rows_f)
     return origin, rows, cols
+
+
+def step_cut(present: np.ndarray, h: np.ndarray, climb: float, labels: np.ndarray | None = None) -> np.ndarray:
+    """Cells to drop: 8-neighbours both `present` whose heights `h` differ by more than `climb` (a ledge, as
+    Recast's ledge filter cuts it) or, with `labels`, that lie on different labels (navmesh islands)."""
+    cut = np.zeros_like(present)
+    hh = np.where(present, h, 0.0)
+    rows, cols = present.shape
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = (slice(0, rows - dr), slice(max(0, -dc), cols - max(0, dc)))
+        b = (slice(dr, None), slice(max(0, dc), cols - max(0, -dc)))
+        bad = np.abs(hh[a] - hh[b]) > climb + 1e-5
+        if labels is not None:
+            bad = (labels[a] != labels[b]) | bad
+        bad = present[a] & present[b] & bad
+        cut[a] |= bad
+        cut[b] |= bad
+    return cut

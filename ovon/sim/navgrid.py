@@ -52,9 +52,9 @@ from ovon.atomic import atomic_write_with
 from ovon.config.sim import AgentConfig, NavConfig
 from ovon.lru import LRU
 from ovon.scenes.model import Scene
-from ovon.sim.cellsample import cell_samples, upward
+from ovon.sim.cellsample import CellSamples, band_surface, cell_samples, pick, upward
 from ovon.sim.gridframe import grid_frame as _grid_frame
-from ovon.sim.gridframe import hint_bands
+from ovon.sim.gridframe import hint_bands, step_cut
 from ovon.sim.los import los_between
 
 MIN_FLOOR_AREA = 1.0  # m^2: smaller clusters of walkable heights are noise, not floors (no-hint mode)
@@ -68,24 +68,6 @@ _uid_counter = itertools.count(1)
 # ----------------------------------------------------------------------------------------------
 # numba kernels
 # ----------------------------------------------------------------------------------------------
-
-
-@njit(cache=True)
-def _sort_cells(ptr, ys, walk):
-    """Sort each cell's samples by height (insertion sort: a cell holds a handful)."""
-    for cell in range(ptr.shape[0] - 1):
-        s0 = ptr[cell]
-        s1 = ptr[cell + 1]
-        for i in range(s0 + 1, s1):
-            y = ys[i]
-            w = walk[i]
-            j = i - 1
-            while j >= s0 and ys[j] > y:
-                ys[j + 1] = ys[j]
-                walk[j + 1] = walk[j]
-                j -= 1
-            ys[j + 1] = y
-            walk[j + 1] = w
 
 
 @njit(cache=True)
@@ -197,24 +179,6 @@ def _covered(ptr, ys, walk, blocked, height, out):
             if walk[k] and not blocked[k]:
                 top = ys[s1 - 1]
                 out[k] = top >= ys[k] + height - 1e-5
-
-
-@njit(cache=True)
-def _floor_heights(ptr, ys, walk, blocked, lo, hi, climb, free_h, any_h):
-    """Per cell with lo <= y < hi: the floor surface = top of the lowest stack of free candidates
-    (a stack: each within `climb` of the previous, e.g. a floor and a low step box lying on it),
-    and the lowest candidate, free or not."""
-    for cell in range(ptr.shape[0] - 1):
-        for k in range(ptr[cell], ptr[cell + 1]):
-            y = ys[k]
-            if walk[k] and y >= lo and y < hi:
-                if math.isnan(any_h[cell]):
-                    any_h[cell] = y
-                if not blocked[k]:
-                    if math.isnan(free_h[cell]):
-                        free_h[cell] = y
-                    elif y <= free_h[cell] + climb + 1e-5:
-                        free_h[cell] = y
 
 
 # ----------------------------------------------------------------------------------------------
@@ -423,20 +387,17 @@ class SceneNav:
 
 @dataclass
 class _Samples:
-    ptr: np.ndarray
-    ys: np.ndarray
-    walk: np.ndarray
-    blocked: np.ndarray
+    cells: CellSamples
+    walk: np.ndarray  # per sample: a floor candidate (its triangle faces up, not too steep)
+    blocked: np.ndarray  # per sample: something intrudes on the agent's height above it
 
 
 def _rasterise(V, F, origin, cs, rows, cols, agent: AgentConfig, max_slope_deg: float) -> _Samples:
     s = cell_samples(V, F, origin, cs, rows, cols, vertical_tol=VERTICAL_TOL)
-    ptr, ys = s.ptr, s.ys
     walk = upward(V, F, math.cos(math.radians(max_slope_deg)))[s.tri]
-    _sort_cells(ptr, ys, walk)
-    blocked = np.zeros(len(ys), dtype=np.bool_)
-    _block_pass(V, F, origin[0], origin[1], cs, rows, cols, ptr, ys, walk, agent.max_climb, agent.height, blocked)
-    return _Samples(ptr, ys, walk, blocked)
+    blocked = np.zeros(len(s.ys), dtype=np.bool_)
+    _block_pass(V, F, origin[0], origin[1], cs, rows, cols, s.ptr, s.ys, walk, agent.max_climb, agent.height, blocked)
+    return _Samples(s, walk, blocked)
 
 
 def _floor_bands(
@@ -447,9 +408,9 @@ def _floor_bands(
     if hints:
         return hint_bands(hints, sep)
     cand = s.walk & ~s.blocked
-    cov = np.zeros(len(s.ys), dtype=np.bool_)
-    _covered(s.ptr, s.ys, s.walk, s.blocked, agent.height, cov)
-    hs = s.ys[cand]
+    cov = np.zeros(len(s.cells.ys), dtype=np.bool_)
+    _covered(s.cells.ptr, s.cells.ys, s.walk, s.blocked, agent.height, cov)
+    hs = s.cells.ys[cand]
     cv = cov[cand]
     if len(hs) == 0:
         return []
@@ -583,16 +544,7 @@ def _make_grid(
 ) -> NavGrid:
     """Ledge cut + radius erosion + drivable opening + islands for one floor's per-cell heights."""
     free = ~np.isnan(free_h)
-    ledge = np.zeros_like(free)
-    fh = np.where(free, free_h, 0.0)
-    tol = agent.max_climb + 1e-5
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        a = (slice(0, free.shape[0] - dr), slice(max(0, -dc), free.shape[1] - max(0, dc)))
-        b = (slice(dr, None), slice(max(0, dc), free.shape[1] - max(0, -dc)))
-        jump = free[a] & free[b] & (np.abs(fh[a] - fh[b]) > tol)
-        ledge[a] |= jump
-        ledge[b] |= jump
-    free &= ~ledge
+    free &= ~step_cut(free, free_h, agent.max_climb)
     heights = np.where(np.isnan(free_h), any_h, free_h).astype(np.float32)
     return _grid(floor, height, origin, cs, free, heights, agent)
 
@@ -615,9 +567,9 @@ def compute_navigation(
     s = _rasterise(V, F, origin, cs, rows, cols, agent, slope)
     grids = []
     for i, (nominal, lo, hi) in enumerate(_floor_bands(s, list(floor_heights or []), agent, nav, cs)):
-        free_h = np.full(rows * cols, np.nan)
-        any_h = np.full(rows * cols, np.nan)
-        _floor_heights(s.ptr, s.ys, s.walk, s.blocked, lo, hi, agent.max_climb, free_h, any_h)
+        # the floor surface: top of the lowest stack of free candidates; where none, the lowest candidate
+        free_h = pick(s.cells.ys, band_surface(s.cells, s.walk & ~s.blocked, lo, hi, agent.max_climb), np.nan)
+        any_h = pick(s.cells.ys, band_surface(s.cells, s.walk, lo, hi), np.nan)
         grids.append(_make_grid(i, nominal, origin, cs, free_h.reshape(rows, cols), any_h.reshape(rows, cols), agent))
     return grids
 

@@ -21,13 +21,12 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy import ndimage
 
 from ovon.config.sim import NavConfig
 from ovon.scenes.hm3dsem.geometry import height_peaks
-from ovon.sim.cellsample import cell_samples
-from ovon.sim.gridframe import grid_frame, hint_bands
+from ovon.sim.cellsample import band_surface, cell_samples, pick
+from ovon.sim.gridframe import grid_frame, hint_bands, step_cut
 from ovon.sim.navmesh.format import NavMesh, NavMeshError, parse_navmesh
 from ovon.sim.navmesh.polys import compute_islands, navmesh_triangles, triangle_areas
 
@@ -55,20 +54,6 @@ class FloorSurface:
 MIN_FLOOR_AREA = 2.0  # m^2 of walkable surface at one height to count as a floor (no scene hints)
 
 
-@njit(cache=True)
-def _lowest(ptr, ys, tag, lo, hi, height, lab):  # noqa: ANN001
-    """Per floor band and cell, the lowest sample and its tag (the first in triangle order on a tie)."""
-    for cell in range(ptr.shape[0] - 1):
-        for k in range(ptr[cell], ptr[cell + 1]):
-            y = ys[k]
-            for b in range(lo.shape[0]):
-                if lo[b] <= y < hi[b]:
-                    if math.isnan(height[b, cell]) or y < height[b, cell]:
-                        height[b, cell] = y
-                        lab[b, cell] = tag[k]
-                    break
-
-
 def lowest_samples(
     tris: np.ndarray,
     label: np.ndarray,
@@ -80,29 +65,19 @@ def lowest_samples(
     hi: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(bands, rows * cols) height of the lowest sample of the (T, 3, 3) triangles per floor band [lo, hi)
-    and cell centre (nan where none: `ovon.sim.cellsample`), and the `label` of its triangle (-1)."""
+    and cell centre (nan where none: `ovon.sim.cellsample`), and the `label` of its triangle (-1). The
+    bands are disjoint (`floor_bands`), so each sample counts for one floor at most."""
     n = len(tris)
     V = np.ascontiguousarray(tris, dtype=np.float64).reshape(-1, 3)
     s = cell_samples(V, np.arange(3 * n).reshape(n, 3), origin, cs, rows, cols, area_tol=_MIN_AREA2)
-    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    tag = np.asarray(label, dtype=np.int32)[s.tri]
+    every = np.ones(len(s.ys), dtype=np.bool_)
     height = np.full((len(lo), rows * cols), np.nan)
     lab = np.full((len(lo), rows * cols), -1, np.int32)
-    _lowest(s.ptr, s.ys, np.asarray(label, dtype=np.int32)[s.tri], lo, hi, height, lab)
+    for b in range(len(lo)):
+        k = band_surface(s, every, lo[b], hi[b])
+        height[b], lab[b] = pick(s.ys, k, np.nan), pick(tag, k, -1)
     return height, lab
-
-
-def _cut(free: np.ndarray, h: np.ndarray, lab: np.ndarray, climb: float) -> np.ndarray:
-    """Cells to drop: 8-neighbours on different islands or more than `climb` apart in height."""
-    cut = np.zeros_like(free)
-    hh = np.where(free, h, 0.0)
-    rows, cols = free.shape
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        a = (slice(0, rows - dr), slice(max(0, -dc), cols - max(0, dc)))
-        b = (slice(dr, None), slice(max(0, dc), cols - max(0, -dc)))
-        bad = free[a] & free[b] & ((lab[a] != lab[b]) | (np.abs(hh[a] - hh[b]) > climb + 1e-5))
-        cut[a] |= bad
-        cut[b] |= bad
-    return cut
 
 
 def floor_bands(tris: np.ndarray, hints: list[float] | None, sep: float) -> list[tuple[float, float, float]]:
@@ -144,7 +119,7 @@ def rasterise(mesh: NavMesh, nav: NavConfig, floor_heights: list[float] | None =
     for i, (nominal, _, _) in enumerate(bands):
         h = height[i].reshape(rows, cols)
         present = ~np.isnan(h)
-        navigable = present & ~_cut(present, h, lab[i].reshape(rows, cols), climb)
+        navigable = present & ~step_cut(present, h, climb, lab[i].reshape(rows, cols))
         free = navigable.copy()
         if radius > 0 and navigable.any():
             free = ndimage.distance_transform_edt(~navigable) * cs <= radius + 1e-6
