@@ -1,5 +1,5 @@
 """Per-step overhead of a served agent (`ovon serve` + `--agent remote:HOST:PORT`) against the same agent
-in-process, on loopback, at the CPU camera (160x120 RGB-D) and the paper's 360x640 camera.
+in-process, on loopback, at 160x120 RGB-D (issue 21's CPU camera) and the paper's 360x640 camera.
 
 Usage: python benchmarks/remote_agent.py [OUT.json] [--steps 300] [--repeats 5] [--batch 8]
 (default OUT: benchmarks/results/remote_agent.json)

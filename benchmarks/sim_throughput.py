@@ -7,7 +7,7 @@ the same measurements of an older ovon (`--baseline-rev`).
         [--baseline-rev REV_OR_WORKTREE_DIR] [--check-steps 300]
 
 Every configuration steps random actions 1-3 with auto-reset and renders depth + the semantic frame
-(always: the episode tracker needs it) + RGB unless the row says "no rgb". Rows: 160x120 (the CPU
+(always: the episode tracker needs it) + RGB unless the row says "no rgb". Rows: 160x120 (issue 21's CPU
 camera) with and without RGB, and the paper's 360x640 portrait camera. For each row: in-process (one
 env, no vector env), gymnasium AsyncVectorEnv with `workers` envs, and ovon's vector env with `workers`
 processes x `envs-per-worker` envs. Reported: median steps/s over `--repeats` alternating runs, CPU ms

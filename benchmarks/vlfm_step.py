@@ -3,9 +3,10 @@
 Usage: python benchmarks/vlfm_step.py OUT.json [--houses 0,1,2] [--episodes 4] [--max-steps 500]
 
 Episodes: procedural houses (`procedural:<seed>`), a random goal category present in the house, a random
-reachable start (the env's seeded reset), the CPU camera (160x120, `ovon.config.sim.cpu_sim_config`), no
-noise. Each episode is run twice on the same start: once by the VLFM agent (oracle detection, oracle-vl
-value: the CPU preset) and once by the frontier expert (`--agent frontier`). Timed: the agent's `act` only
+reachable start (the env's seeded reset), the CPU camera (`ovon.config.sim.cpu_sim_config`: 72x128
+portrait; 160x120 before issue 33, as in results/vlfm_step.json), no noise. Each episode is run twice on
+the same start: once by the VLFM agent (oracle detection, oracle-vl value: the CPU preset) and once by
+the frontier expert (`--agent frontier`). Timed: the agent's `act` only
 (wall clock, and the calling thread's CPU time, which other processes on the shared cores disturb less);
 rendering and the env are not. The first episode of each agent only warms up (numba, the text model) and
 is not counted. Printed and written: median / p95 / mean ms per step of both, their ratio, and VLFM's
@@ -117,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
             )
         env.close()
     out: dict = {
-        "benchmark": "VLFM agent act() per step vs the frontier expert, CPU camera 160x120",
+        "benchmark": "VLFM agent act() per step vs the frontier expert, CPU camera "
+        f"{sim.camera.width}x{sim.camera.height}",
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": sys.version.split()[0]},
         "camera": vars(sim.camera),
         "agents": {},

@@ -77,7 +77,8 @@ class SimConfig:
 
 
 def cpu_sim_config() -> SimConfig:
-    """Fast CPU preset: small landscape frames. Not the paper's view: the same 42 deg horizontal field but
-    32 deg vertical instead of the portrait camera's 68.6 deg, so the floor right in front of the agent and
-    low furniture fall out of frame; 72x128 (cpu-small's policies, the experiments) keeps the paper's 9:16."""
-    return SimConfig(camera=CameraConfig(width=160, height=120))
+    """The CPU camera, the default of every command and CPU preset (`ovon evaluate`, the demo, training):
+    the paper's camera geometry (9:16 portrait, 42 deg HFOV, so 68.6 deg vertical) at 72 wide x 128 tall,
+    1/25 of the 360x640 pixels. The shipped checkpoints and cpu-small's policies were trained with it, so a
+    learned policy or PointNav navigator runs under the defaults."""
+    return SimConfig(camera=CameraConfig(width=72, height=128))

@@ -133,7 +133,7 @@ class ObjectNavEnv(gym.Env):
         if isinstance(overrides, str) or not isinstance(overrides, Sequence):
             raise ConfigError(
                 f"overrides = {_shown(overrides)}: expected a list of 'key=value' strings; fix: pass "
-                "e.g. overrides=['sim.camera.width=160']"
+                "e.g. overrides=['task.max_steps=300']"
             )
         if overrides:
             data = parse_overrides(list(overrides))
@@ -141,7 +141,7 @@ class ObjectNavEnv(gym.Env):
             if unknown:
                 raise ConfigError(
                     f"overrides = {_shown(list(overrides))}: unknown group(s) {', '.join(unknown)}; "
-                    "expected keys under sim. or task.; fix: e.g. overrides=['sim.camera.width=160']"
+                    "expected keys under sim. or task.; fix: e.g. overrides=['task.max_steps=300']"
                 )
             sim = merge(sim, data["sim"], "sim") if "sim" in data else sim
             task = merge(task, data["task"], "task") if "task" in data else task
