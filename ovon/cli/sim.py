@@ -53,8 +53,11 @@ class BenchArgs:
 
 
 def _camera_args(p) -> None:
-    p.add_argument("--width", type=int, default=160)
-    p.add_argument("--height", type=int, default=120)
+    from ovon.config.sim import cpu_sim_config
+
+    cam = cpu_sim_config().camera  # the one CPU default of every command
+    p.add_argument("--width", type=int, default=cam.width, help=f"pixels (default {cam.width}, the CPU camera)")
+    p.add_argument("--height", type=int, default=cam.height, help=f"pixels (default {cam.height}, the CPU camera)")
     p.add_argument("--hfov", type=float, default=None, help="horizontal FOV in degrees (default: the config's)")
     p.add_argument("--backend", choices=["auto", "gl", "embree"], default="auto")
 

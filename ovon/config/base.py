@@ -794,12 +794,12 @@ def parse_overrides(items: list[str] | tuple[str, ...]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for item in items:
         if "=" not in item:
-            raise ConfigError(f"override {item!r} is not of the form key=value; fix: e.g. --set sim.camera.width=160")
+            raise ConfigError(f"override {item!r} is not of the form key=value; fix: e.g. --set sim.camera.width=72")
         key, raw = item.split("=", 1)
         parts = key.strip().split(".")
         if any(not p.strip() for p in parts):
             raise ConfigError(
-                f"override {item!r}: empty key part in {key.strip()!r}; fix: e.g. --set sim.camera.width=160"
+                f"override {item!r}: empty key part in {key.strip()!r}; fix: e.g. --set sim.camera.width=72"
             )
         value = _yaml_scalar(raw)
         node = out
