@@ -55,6 +55,32 @@ def test_make_obs_broadcasts_goal() -> None:
 
 
 @pytest.mark.parametrize("core", ["transformer", "lstm"])
+def test_evaluate_reads_a_chunk_and_drops_its_context_prefix(core: str) -> None:
+    """`evaluate(chunk, state)`: the one way a learner reads a sequence batch (frozen-encoder embeddings, a
+    float16 buffer's too) gives forward's outputs after the chunk's prefix and the LSTM's state after it."""
+    from ovon.models.chunk import Chunk
+
+    p = _policy(core)
+    obs, prev = _data(3, 9)
+    starts = prev < 0
+    goal = obs[..., IMG:]
+    logits, values, state = p.forward_seq(obs, prev, starts)
+    for images in (obs[..., :IMG], obs[..., :IMG].half()):
+        got = p.evaluate(Chunk(images, goal, prev, starts, prefix=4))
+        want_obs = ActorCritic.make_obs(images.float(), goal)
+        want = p.forward_seq(want_obs, prev, starts)
+        assert torch.equal(got[0], want[0][:, 4:]) and torch.equal(got[1], want[1][:, 4:])
+    got = p.evaluate(Chunk(obs[..., :IMG], goal, prev, starts), via=p)  # through a (DDP) module: no state
+    torch.testing.assert_close(got[0], logits)
+    torch.testing.assert_close(got[1], values)
+    assert got[2] is None
+    if core == "lstm":  # chunk by chunk with the state carried: one pass
+        first = p.evaluate(Chunk(obs[:, :5, :IMG], goal[:, :5], prev[:, :5], starts[:, :5]))
+        second = p.evaluate(Chunk(obs[:, 5:, :IMG], goal[:, 5:], prev[:, 5:], starts[:, 5:]), first[2])
+        torch.testing.assert_close(torch.cat([first[0], second[0]], 1), logits)
+
+
+@pytest.mark.parametrize("core", ["transformer", "lstm"])
 def test_causality(core: str) -> None:
     p = _policy(core)
     obs, prev = _data(2, 12)

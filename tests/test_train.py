@@ -596,7 +596,7 @@ def test_cli_train_resume_refuses_another_run(tmp_path: Path, table_path: str, c
 # ----- schedule / config / CLI ------------------------------------------------------------------------
 def test_finetune_schedule_matches_baselines() -> None:
     from ovon.train.config import FinetuneConfig
-    from ovon.train.ppo import finetune_lrs
+    from ovon.train.finetune import finetune_lrs
 
     ft = FinetuneConfig()
     assert finetune_lrs(ft, 0) == (2.5e-4, 0.0)
@@ -675,8 +675,41 @@ def test_imitation_loss_weights_stop_and_ignores_unlabelled() -> None:
     assert torch.allclose(imitation_loss(logits, target, stop_weight=4.0), (per * w).sum() / w.sum())
 
 
+def test_dagger_buffer_keeps_its_checkpoint_form() -> None:
+    """DAgger's buffered chunks go into a checkpoint as the plain tuples and dicts it has always held (a
+    checkpoint from before context_prefix, without context or LSTM state, still loads); a context part two
+    entries share stays one object, and a chunk is read after exactly `prefix` context steps."""
+    from ovon.models.chunk import Chunk, last_steps
+    from ovon.train.dagger import buffer_from_saved, buffer_to_saved
+
+    def chunk(seed: int) -> Chunk:
+        g = torch.Generator().manual_seed(seed)
+        steps = (2, 3)
+        return Chunk(
+            torch.randn(*steps, 4, generator=g),
+            torch.randn(*steps, 5, generator=g),
+            torch.randint(0, 6, steps, generator=g),
+            torch.zeros(steps, dtype=torch.bool),
+            torch.randint(0, 6, steps, generator=g),
+        )
+
+    a, b, c = chunk(0), chunk(1), chunk(2)
+    b.context = last_steps([a.observations()], 7)
+    c.context = last_steps([*b.context, b.observations()], 7)  # all of a (b's part) and of b
+    saved = buffer_to_saved([a, b, c])
+    assert all(len(e) == 7 and isinstance(e, tuple) for e in saved)
+    assert saved[1][5][0] is saved[2][5][0] and set(saved[2][5][1]) == {"images", "goals", "prevs", "starts"}
+    back = buffer_from_saved(saved)
+    assert back[1].context[0] is back[2].context[0] and torch.equal(back[2].labels, c.labels)
+    seq = back[2].with_context(7)  # 6 context steps and 1 of padding (an episode start) before the chunk
+    assert seq.prefix == 7 and seq.length == 10 and bool(seq.starts[:, 0].all())
+    assert torch.equal(seq.goals[:, 1:], torch.cat([a.goals, b.goals, c.goals], 1))
+    old = buffer_from_saved([(a.images, a.goals, a.prevs, a.starts, a.labels)])[0]
+    assert old.context == [] and old.state0 is None and old.with_context(2).length == 5
+
+
 def test_evaluate_uses_the_camera_a_policy_was_trained_with(tmp_path) -> None:
-    from ovon.cli.evaluate import checkpoint_facts
+    from ovon.evaluate.config import checkpoint_facts
     from ovon.models.config import EncoderConfig, policy_preset
     from ovon.models.policy import build_policy
 

@@ -17,8 +17,8 @@ torch.set_num_threads(1)
 from ovon.train.collect import explained_variance, gae  # noqa: E402
 from ovon.train.config import FinetuneConfig, train_preset  # noqa: E402
 from ovon.train.episodes import adhoc_specs  # noqa: E402
+from ovon.train.finetune import anchor_weight, kl_to, reference_logits  # noqa: E402
 from ovon.train.logging import read_metrics  # noqa: E402
-from ovon.train.ppo import anchor_weight, kl_to, reference_logits  # noqa: E402
 from ovon.train.text import needed_texts, write_text_table  # noqa: E402
 
 
@@ -144,6 +144,7 @@ def test_lstm_reference_carries_its_own_memory_from_chunk_to_chunk() -> None:
     """The KL anchor's reference LSTM, read chunk by chunk with its own carried (h, c), gives the logits of
     one pass over the whole rollout; read with the fine-tuned policy's memory (what the anchor did before)
     it gives other logits from the second chunk on."""
+    from ovon.models.chunk import Chunk
     from ovon.models.config import policy_preset
     from ovon.models.policy import build_policy
 
@@ -163,13 +164,10 @@ def test_lstm_reference_carries_its_own_memory_from_chunk_to_chunk() -> None:
         ref_state = tuned_state = None
         for c in range(chunks):
             sl = slice(c * T, c * T + T + 1)
-            logits, ref_state = reference_logits(
-                reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0, T, ref_state
-            )
+            chunk = Chunk(img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl])
+            logits, ref_state = reference_logits(reference, chunk, T, ref_state)
             torch.testing.assert_close(logits, whole[:, c * T : (c + 1) * T], rtol=1e-5, atol=1e-5)
-            wrong, _ = reference_logits(
-                reference, img[:, sl], goal[:, sl], prev[:, sl], starts[:, sl], 0, T, tuned_state
-            )
+            wrong, _ = reference_logits(reference, chunk, T, tuned_state)
             if c > 0:
                 assert (wrong - logits).abs().max() > 1e-3
             tuned_state = tuned.forward_seq(

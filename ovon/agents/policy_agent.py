@@ -88,13 +88,13 @@ class PolicyAgent:
         if self.image_encoder is not None and hasattr(self.image_encoder, "reseed"):
             self.image_encoder.reseed(int(episode_info.get("seed", 0)))
 
-    def _image(self, observation: dict) -> torch.Tensor:
+    def _image(self, observation: dict) -> torch.Tensor | dict[str, torch.Tensor]:
+        """The image input of one step: frames for the policy's own CNN, else the frozen encoder's embedding."""
         if self.image_encoder is None:
-            batch = {
+            return {
                 "rgb": torch.from_numpy(np.ascontiguousarray(observation["rgb"]))[None].to(self.device),
                 "depth": torch.from_numpy(np.asarray(observation["depth"], np.float32))[None].to(self.device),
             }
-            return self.policy.encode_images(batch)
         semantic = None
         if self.privileged:
             p = observation["privileged"]
@@ -117,7 +117,7 @@ class PolicyAgent:
             goal = torch.as_tensor(np.asarray(observation["pointgoal"], np.float32))[None].to(self.device)
         else:
             goal = self.text.encode([observation["goal"]]).to(self.device)
-        obs = self.policy.make_obs(self._image(observation).float(), goal)
+        obs = self.policy.embed(self._image(observation), goal)
         first = torch.tensor([self._first], device=self.device)
         logits, _, self._state = self.policy.act_step(obs, self._prev, self._state, first)
         if self.deterministic:

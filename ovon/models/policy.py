@@ -23,6 +23,7 @@ from torch import nn
 from torch.distributions import Categorical
 
 from ovon.config.base import from_dict, to_dict
+from ovon.models.chunk import Chunk, Images
 from ovon.models.config import EncoderConfig, PolicyConfig, text_aligned_parts
 from ovon.models.lstm import LSTMCore, matched_lstm_hidden, transformer_core_params
 from ovon.models.transformer import TransformerCore
@@ -35,7 +36,8 @@ NARROW_FLOATS = (torch.float16, torch.bfloat16)
 
 
 class ActorCritic(nn.Module):
-    """Policy + value function; `forward` for training on chunks, `act_step`/`act` for online acting.
+    """Policy + value function; `evaluate` reads a learner's `Chunk` (`forward` the embedded sequence),
+    `act_step`/`act` act online, `embed` turns an env's images and goals into the input of either.
 
     If `encoder_cfg.image == "cnn"` the trainable CNN lives inside the policy (`image_encoder`), so
     it is optimised, saved and loaded with it; frozen encoders stay outside (embeddings are inputs).
@@ -115,6 +117,22 @@ class ActorCritic(nn.Module):
             raise RuntimeError("this policy owns no image encoder; pass precomputed embeddings")
         return self.image_encoder.encode(batch)
 
+    def image_features(self, images: Images) -> torch.Tensor:
+        """Image embeddings for a batch with any leading dims: a tensor passes through (float16 buffer
+        embeddings too: `make_obs` widens them as it concatenates); raw frames go through the policy's
+        trainable CNN (with gradients when called under grad)."""
+        if isinstance(images, torch.Tensor):
+            return images if images.dtype in NARROW_FLOATS else images.float()
+        rgb = images["rgb"]
+        lead = rgb.shape[:-3]
+        flat = {k: v.reshape(-1, *v.shape[len(lead) :]) for k, v in images.items()}
+        return self.encode_images(flat).reshape(*lead, -1)
+
+    def embed(self, images: Images, goals: torch.Tensor) -> torch.Tensor:
+        """The core's observation input for images (embeddings or frames) and goal embeddings, any leading dims:
+        the one place acting, learning and evaluation turn what an env gives into what the policy reads."""
+        return self.make_obs(self.image_features(images), goals)
+
     def _project(self, obs_emb: torch.Tensor, prev_actions: torch.Tensor, starts: torch.Tensor | None):
         if obs_emb.shape[-1] != self.obs_dim:
             raise ValueError(f"obs_emb last dim {obs_emb.shape[-1]} != image_dim + text_dim = {self.obs_dim}")
@@ -158,6 +176,21 @@ class ActorCritic(nn.Module):
         else:
             feats, new_state = self.core(x, episode_starts, state)
         return self.action_head(feats), self.critic_head(feats).squeeze(-1), new_state
+
+    def evaluate(
+        self, chunk: Chunk, state: Any = None, via: nn.Module | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, Any]:
+        """Logits (N, L', A) and values (N, L') of the chunk's steps after its context prefix (L' = L - prefix),
+        and the core's state after the chunk (LSTM (h, c); None for a transformer, or when run `via`).
+
+        `state`: the LSTM's before the chunk. `via`: the module the sequence goes through for a loss, this policy
+        or its DDP wrapper (whose forward is what syncs gradients across ranks; it returns no state)."""
+        obs = self.embed(chunk.images, chunk.goals)
+        if via is None:
+            logits, values, state = self.forward_seq(obs, chunk.prevs, chunk.starts, state)
+        else:
+            (logits, values), state = via(obs, chunk.prevs, chunk.starts, state), None
+        return logits[:, chunk.prefix :], values[:, chunk.prefix :], state
 
     def forward(
         self,

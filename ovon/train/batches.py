@@ -1,45 +1,9 @@
-"""Tensor plumbing shared by the algorithms: image batches (embeddings or raw frames for a trainable
-CNN), the imitation loss and episode summaries."""
+"""What the learners share besides the chunk (`ovon.models.chunk`): the imitation loss and episode summaries."""
 
 from __future__ import annotations
 
 import numpy as np
 import torch
-
-from ovon.models.policy import NARROW_FLOATS
-
-# An image batch: precomputed embeddings (..., D) float, or raw frames {"rgb": (..., H, W, 3) uint8,
-# "depth": (..., H, W) float} for a trainable CNN that lives inside the policy.
-Images = torch.Tensor | dict[str, torch.Tensor]
-
-
-def features(policy, images: Images) -> torch.Tensor:
-    """Image embeddings for a batch with any leading dims: a tensor passes through (float16 buffer
-    embeddings too: `make_obs` widens them as it concatenates); raw frames go through the policy's
-    trainable CNN (with gradients when called under grad)."""
-    if isinstance(images, torch.Tensor):
-        return images if images.dtype in NARROW_FLOATS else images.float()
-    rgb = images["rgb"]
-    lead = rgb.shape[:-3]
-    flat = {k: v.reshape(-1, *v.shape[len(lead) :]) for k, v in images.items()}
-    return policy.encode_images(flat).reshape(*lead, -1)
-
-
-def stack_images(items: list[Images], dim: int = 0) -> Images:
-    if isinstance(items[0], torch.Tensor):
-        return torch.stack(items, dim)
-    return {k: torch.stack([x[k] for x in items], dim) for k in items[0]}
-
-
-def cat_images(items: list[Images]) -> Images:
-    """Concatenate along the first (env) dimension."""
-    if isinstance(items[0], torch.Tensor):
-        return torch.cat(items)
-    return {k: torch.cat([x[k] for x in items]) for k in items[0]}
-
-
-def map_images(images: Images, fn) -> Images:
-    return fn(images) if isinstance(images, torch.Tensor) else {k: fn(v) for k, v in images.items()}
 
 
 def imitation_loss(logits: torch.Tensor, target: torch.Tensor, stop_weight: float = 1.0) -> torch.Tensor:

@@ -20,9 +20,10 @@ import numpy as np
 import torch
 
 from ovon.config.base import to_dict
+from ovon.models.chunk import Chunk
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.batches import features, imitation_loss
+from ovon.train.batches import imitation_loss
 from ovon.train.checkpoint import atomic_torch_save
 from ovon.train.config import TrainConfig, reward_for
 from ovon.train.run import TrainRun, expert_config
@@ -215,8 +216,8 @@ def load_shards(shard_dir: str | Path, context: int) -> ChunkData:
     )
 
 
-def make_batch(data: ChunkData, chunk_ids: torch.Tensor, device: torch.device) -> dict[str, Any]:
-    """Pad the chosen chunks to the longest: image (B,L,...), goal (B,L,Dg), prev/act (B,L), starts, mask."""
+def make_batch(data: ChunkData, chunk_ids: torch.Tensor, device: torch.device) -> Chunk:
+    """The chosen chunks padded to the longest (B, L, ...); the padding's labels are -1."""
     c = data.chunks[chunk_ids]
     L = int(c[:, 1].max())
     ar = torch.arange(L)
@@ -226,14 +227,14 @@ def make_batch(data: ChunkData, chunk_ids: torch.Tensor, device: torch.device) -
         image: Any = data.image[idx].to(device).float()
     else:
         image = {k: v[idx].to(device) for k, v in data.image.items()}
-    return {
-        "image": image,
-        "goal": data.goal[data.episode[idx]].to(device),
-        "prev": data.prev_action[idx].to(device),
-        "starts": data.start[idx].to(device),
-        "action": data.action[idx].to(device),
-        "mask": mask.to(device),
-    }
+    action = data.action[idx].to(device)
+    return Chunk(
+        image,
+        data.goal[data.episode[idx]].to(device),
+        data.prev_action[idx].to(device),
+        data.start[idx].to(device),
+        labels=torch.where(mask.to(device), action, torch.full_like(action, -1)),
+    )
 
 
 def epoch_permutation(n: int, seed: int, epoch: int) -> torch.Tensor:
@@ -284,18 +285,16 @@ def train_bc(
             ids = perm[torch.arange(lo, lo + B) % n_chunks]
             b = make_batch(data, ids, dev)
             with run.learning():
-                obs = policy.make_obs(features(policy, b["image"]), b["goal"])
-                logits, values = model(obs, b["prev"], b["starts"])
-            logits, values = logits.float(), values.float()
-            m = b["mask"]
-            target = torch.where(m, b["action"], torch.full_like(b["action"], -1))
+                logits, values, _ = policy.evaluate(b, via=model)
+            logits, values, target = logits.float(), values.float(), b.labels
             loss = imitation_loss(logits, target, cfg.stop_loss_weight) + 0.0 * values.sum()
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(policy.parameters(), cfg.max_grad_norm)
             optimizer.step()
+            m = target >= 0  # the chunks' steps (not padding)
             run.step += int(m.sum()) * W
-            acc = (logits[m].argmax(-1) == b["action"][m]).float().mean()
+            acc = (logits[m].argmax(-1) == target[m]).float().mean()
             scalars = dist.all_reduce_mean(
                 {"loss": loss.item(), "accuracy": acc.item(), "grad_norm": float(grad_norm)}, info
             )

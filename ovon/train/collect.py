@@ -1,5 +1,6 @@
 """The acting loop shared by DAgger and PPO: a policy acts in the training envs for T steps and every
-observation, label, action and reward is recorded; plus the pure return/advantage arithmetic.
+observation, label, action and reward is recorded (a `Rollout`: a `Chunk` plus what was done and got);
+plus the pure return/advantage arithmetic.
 
 The collector owns what acting carries across updates (the envs' current batch, the policy's acting
 memory, the previous actions) and hands it to the checkpoint (`state`) and back (`restore`), so an
@@ -10,11 +11,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import torch
 
-from ovon.train.batches import Images, features, map_images, stack_images
+from ovon.models.chunk import Chunk, cat_time, map_images, pad_time, slice_time, stack_images
 from ovon.train.checkpoint import to_device
 from ovon.train.envs import Batch
 
@@ -24,21 +24,17 @@ Chooser = Callable[[torch.Tensor, Batch], tuple[torch.Tensor, torch.Tensor | Non
 
 @dataclass
 class Rollout:
-    """`steps` steps of every env, stacked as (N, T, ...) tensors on the CPU; with a bootstrap
-    observation the observation tensors hold T + 1 steps (the last one: value only, no action)."""
+    """`steps` steps of every env as (N, T, ...) tensors on the CPU. `chunk`: what the policy read, after the
+    collector's context prefix; with a bootstrap observation T + 1 steps (the last one: value only, no action);
+    its labels are the expert's per step (-1 without an expert), its `state0` the acting memory before it
+    (LSTM (h, c); None for the transformer)."""
 
-    images: Images
-    goals: torch.Tensor
-    prevs: torch.Tensor  # previous action of each step (-1 at an episode start)
-    starts: torch.Tensor  # bool: the step is the first of an episode
-    labels: torch.Tensor  # the expert's label per step (-1 without an expert)
+    chunk: Chunk
     actions: torch.Tensor  # (N, T)
     behaviour_logp: torch.Tensor | None  # (N, T) log-prob of each action when it was taken
     rewards: torch.Tensor  # (N, T): reward of step t
     dones: torch.Tensor  # (N, T): step t ended its episode
-    state0: Any  # the acting memory before the chunk (LSTM (h, c); None for the transformer)
     finished: list[dict] = field(default_factory=list)  # metrics of the episodes that ended
-    prefix: int = 0  # leading steps of images/goals/prevs/starts that precede the chunk (context only)
 
 
 def acting_context(policy_cfg) -> int:
@@ -46,7 +42,7 @@ def acting_context(policy_cfg) -> int:
     each layer's keys were computed when their step was acted, from that step's own window. An update that
     prepends this many steps to a chunk computes the logits acting computed. ("recompute" acting re-runs
     only the last `context` steps each step, which no single forward over a sequence equals beyond one layer;
-    `behaviour_kl` shows the difference.) 0 for the LSTM, whose memory is its state (`Rollout.state0`)."""
+    `behaviour_kl` shows the difference.) 0 for the LSTM, whose memory is its state (`Chunk.state0`)."""
     return policy_cfg.layers * (policy_cfg.context - 1) if policy_cfg.core == "transformer" else 0
 
 
@@ -100,7 +96,7 @@ class RolloutCollector:
             if t == steps:
                 break
             with torch.inference_mode():  # no autograd bookkeeping at all (cheaper than no_grad per op)
-                obs = actor.make_obs(features(actor, map_images(b.image, lambda x: x.to(dev))), b.goal.to(dev))
+                obs = actor.embed(map_images(b.image, lambda x: x.to(dev)), b.goal.to(dev))
                 logits, _, self.act_state = actor.act_step(obs, self.prev_action, self.act_state, b.first.to(dev))
                 action, logp = choose(logits, b)
             actions.append(action.cpu())
@@ -120,15 +116,12 @@ class RolloutCollector:
         if self.prefix > 0:
             obs = self._with_prefix(obs, steps)
         return Rollout(
-            **obs,
-            labels=torch.stack(labels, 1),
+            Chunk(**obs, labels=torch.stack(labels, 1), state0=state0, prefix=self.prefix),
             actions=torch.stack(actions, 1),
             behaviour_logp=torch.stack(logps, 1) if logps else None,
             rewards=torch.stack(rewards, 1),
             dones=torch.stack(dones, 1),
-            state0=state0,
             finished=finished,
-            prefix=self.prefix,
         )
 
     def _with_prefix(self, obs: dict, steps: int) -> dict:
@@ -142,25 +135,6 @@ class RolloutCollector:
         acted = {k: slice_time(full[k], P, P + steps) for k in full}  # the chunk without its bootstrap
         self.tail = {k: slice_time(cat_time(tail[k], acted[k]), -P, None) for k in full}
         return full
-
-
-def cat_time(a, b):
-    """Two (N, T, ...) step tensors (or dicts of them: CNN images) joined in time."""
-    return {k: torch.cat([a[k], b[k]], 1) for k in a} if isinstance(a, dict) else torch.cat([a, b], 1)
-
-
-def slice_time(x, lo, hi):
-    """Steps lo:hi of (N, T, ...) step tensors (or dicts of them); a view."""
-    return {k: v[:, lo:hi] for k, v in x.items()} if isinstance(x, dict) else x[:, lo:hi]
-
-
-def pad_time(x, n: int, start: bool):
-    """n steps of padding shaped like x's first step (starts: all True)."""
-    if isinstance(x, dict):
-        return {k: pad_time(v, n, start) for k, v in x.items()}
-    first = x[:, :1]
-    pad = torch.ones_like(first) if start else torch.zeros_like(first)
-    return pad.expand(-1, n, *first.shape[2:]).clone()
 
 
 def _clone_state(state):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 from ovon.config.base import Pattern, constrained, in_range, less, non_negative, positive, rule
-from ovon.config.sim import CameraConfig, SimConfig
+from ovon.config.sim import CameraConfig, SimConfig, cpu_sim_config
 from ovon.config.task import RewardConfig, TaskConfig, pointnav_task
 from ovon.experts.config import FrontierExpertConfig, ShortestPathExpertConfig
 from ovon.models.config import EncoderConfig, PolicyConfig
@@ -147,7 +147,7 @@ class TrainConfig:
     algo: Algo = "dagger"
     policy: PolicyConfig = field(default_factory=PolicyConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
-    sim: SimConfig = field(default_factory=lambda: SimConfig(camera=CameraConfig(width=160, height=120)))
+    sim: SimConfig = field(default_factory=cpu_sim_config)
     task: TaskConfig = field(default_factory=TaskConfig)
     expert: ExpertName = "frontier"
     frontier_expert: FrontierExpertConfig = field(default_factory=FrontierExpertConfig)
@@ -239,9 +239,9 @@ def _cpu_small() -> TrainConfig:
             oracle_depth_grid=(6, 4),
             oracle_collision=True,
         ),
-        # Portrait like the Stretch camera (paper: 360x640, 42 deg HFOV): a landscape frame hides the floor
-        # and low furniture in front of the agent.
-        sim=SimConfig(camera=CameraConfig(width=72, height=128)),
+        # The CPU camera: portrait like the Stretch camera (paper: 360x640, 42 deg HFOV) at 72x128; a landscape
+        # frame hides the floor and low furniture in front of the agent.
+        sim=cpu_sim_config(),
         task=TaskConfig(max_steps=300),
         num_envs=8,
         env_workers=2,
@@ -311,7 +311,8 @@ def _pointnav(scale: str) -> TrainConfig:
     policy = PolicyConfig(
         hidden=128, layers=2, heads=4, mlp=256, context=32, prev_action_dim=16, num_actions=4, stop_bias=-3.0
     )
-    sim = SimConfig(camera=CameraConfig(width=72, height=128, rgb=False))
+    cpu = cpu_sim_config()
+    sim = dataclasses.replace(cpu, camera=dataclasses.replace(cpu.camera, rgb=False))  # the CPU camera, depth only
     # DD-PPO's PointNav values (2 epochs, grad norm 0.2). With 4 epochs and grad norm 0.5 a run reached 82%
     # SR on its training episodes at 340k steps, then entropy fell to 0.1, approx_kl spiked to 1e4 and SR
     # fell to 45% within 100k steps.

@@ -12,7 +12,6 @@ on a CPU); with `dagger.beta_*` > 0 the expert's own action drives the env with 
 
 from __future__ import annotations
 
-import functools
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -20,10 +19,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ovon.models.chunk import Chunk, last_steps
 from ovon.task.episode import EpisodeSpec
 from ovon.train import distributed as dist
-from ovon.train.batches import cat_images, episode_summary, features, imitation_loss, map_images
-from ovon.train.collect import RolloutCollector, acting_context, cat_time, pad_time, slice_time
+from ovon.train.batches import episode_summary, imitation_loss
+from ovon.train.collect import Rollout, RolloutCollector, acting_context
 from ovon.train.config import TrainConfig, reward_for
 from ovon.train.run import TrainRun, num_updates
 
@@ -60,11 +60,11 @@ def train_dagger(
         # context steps before each chunk (transformer) and the acting memory at its start (LSTM)
         P = acting_context(policy.cfg) if cfg.dagger.context_prefix else 0
         keep_state = cfg.dagger.context_prefix and policy.cfg.core == "lstm"
-        buffer: list[tuple] = []  # aggregated labelled rollouts (cfg.dagger.buffer_rollouts most recent)
+        buffer: list[Chunk] = []  # aggregated labelled rollouts (cfg.dagger.buffer_rollouts most recent)
         saved = run.restore(optimizer)
         if saved is not None:
             collector.restore(saved)
-            buffer = list(saved.get("buffer", []))
+            buffer = buffer_from_saved(saved.get("buffer", []))
             if overlap:
                 actor.load_state_dict(saved["actor"])
                 learn_rng.set_state(saved["learn_rng"])
@@ -72,7 +72,7 @@ def train_dagger(
         total = num_updates(cfg, run.info.world_size)
         run.open_logger(total)
 
-        def learn(data: list[tuple], acted: tuple) -> dict:
+        def learn(data: list[Chunk], acted: tuple) -> dict:
             """`grad_steps` cross-entropy steps on the expert's labels over (num_envs, T) chunks. `acted`: the
             newest rollout's (actions, their log-probs when acting), for `behaviour_kl` (as PPO's: 0 when the
             first step's update reads the policy that acted; with `dagger.overlap` it also holds the one
@@ -84,19 +84,12 @@ def train_dagger(
                 picks = [len(data) - 1]  # the newest rollout, plus random older ones
                 older = torch.randperm(len(data) - 1, generator=learn_rng)[: cfg.dagger.sample_rollouts - 1]
                 parts = [data[i] for i in picks + older.tolist()]
-                seqs = [with_context(p, P) for p in parts]  # (N, P + T, ...): context, then the chunk
-                img = map_images(cat_images([q["images"] for q in seqs]), lambda x: x.to(dev))
+                # (N, P + T, ...): context, then the chunk (no loss on the context)
+                seq = Chunk.cat([p.with_context(P) for p in parts]).to(dev)
                 state0 = start_states(policy, parts, dev) if keep_state else None
                 with run.learning():
-                    obs = policy.make_obs(features(policy, img), torch.cat([q["goals"] for q in seqs]).to(dev))
-                    logits, values = model(
-                        obs,
-                        torch.cat([q["prevs"] for q in seqs]).to(dev),
-                        torch.cat([q["starts"] for q in seqs]).to(dev),
-                        state0,
-                    )
-                logits, values = logits[:, P:].float(), values[:, P:].float()  # no loss on the context
-                target = torch.cat([p[4] for p in parts]).to(dev)
+                    logits, values, _ = policy.evaluate(seq, state0, via=model)
+                logits, values, target = logits.float(), values.float(), seq.labels
                 if g == 0:  # rows 0..num_envs: the newest rollout
                     with torch.no_grad():
                         actions, acted_logp = (x.to(dev) for x in acted)
@@ -182,7 +175,7 @@ def train_dagger(
                 record["wall_s"] = time.perf_counter() - t0
                 finish(update, learned, record)
             if checkpoint:
-                state = {**collector.state(), "buffer": buffer}
+                state = {**collector.state(), "buffer": buffer_to_saved(buffer)}
                 if overlap:
                     state |= {"actor": actor.state_dict(), "learn_rng": learn_rng.get_state()}
                 run.save(update + 1, optimizer, state)
@@ -199,58 +192,51 @@ def train_dagger(
     return last
 
 
-def buffer_entry(ro, previous: tuple | None, prefix: int, keep_state: bool) -> tuple:
-    """A rollout as the buffer keeps it: (images, goals, prevs, starts, labels, context, state0). `context`
-    lists the `prefix` steps acted before the chunk as views of the previous entries' tensors (no copy; a
-    dropped entry's storage lives on only while a later entry's context needs it); before the first
-    rollout there is none, and every env's first step there is an episode start. `state0`: the LSTM's
-    acting (h, c) at the chunk's start."""
-    context: list[dict] = []
+def buffer_entry(ro: Rollout, previous: Chunk | None, prefix: int, keep_state: bool) -> Chunk:
+    """A rollout as the buffer keeps it: its chunk with images compacted, the LSTM's acting (h, c) at its start
+    (`keep_state`), and as `context` the `prefix` steps acted before it, as views of the previous entries'
+    tensors (no copy; a dropped entry's storage lives on only while a later entry's context needs it); before
+    the first rollout there is none, and every env's first step there is an episode start."""
+    context: list[Chunk] = []
     if prefix > 0 and previous is not None:
-        context = last_steps([*_context_of(previous), _chunk_of(previous)], prefix)
-    return (_compact(ro.images), ro.goals, ro.prevs, ro.starts, ro.labels, context, ro.state0 if keep_state else None)
+        context = last_steps([*previous.context, previous.observations()], prefix)
+    c = ro.chunk
+    return Chunk(
+        _compact(c.images), c.goals, c.prevs, c.starts, c.labels, c.state0 if keep_state else None, context=context
+    )
 
 
-def _chunk_of(entry: tuple) -> dict:
-    return {"images": entry[0], "goals": entry[1], "prevs": entry[2], "starts": entry[3]}
+def buffer_to_saved(buffer: list[Chunk]) -> list[tuple]:
+    """The buffer as checkpoints hold it, plain tuples and dicts: (images, goals, prevs, starts, labels, context,
+    state0), each context part {images, goals, prevs, starts}. A part shared by several entries stays one object."""
+    parts: dict[int, dict] = {}
+
+    def part(c: Chunk) -> dict:
+        return parts.setdefault(id(c), {"images": c.images, "goals": c.goals, "prevs": c.prevs, "starts": c.starts})
+
+    return [(e.images, e.goals, e.prevs, e.starts, e.labels, [part(c) for c in e.context], e.state0) for e in buffer]
 
 
-def _context_of(entry: tuple) -> list[dict]:
-    return entry[5] if len(entry) > 5 else []  # buffers saved before context_prefix existed: none
+def buffer_from_saved(saved: list[tuple]) -> list[Chunk]:
+    """The buffer of a checkpoint (`buffer_to_saved`; written before context_prefix: no context, no state0)."""
+    parts: dict[int, Chunk] = {}
+
+    def part(d: dict) -> Chunk:
+        return parts.setdefault(id(d), Chunk(d["images"], d["goals"], d["prevs"], d["starts"]))
+
+    return [
+        Chunk(
+            *e[:5],
+            state0=e[6] if len(e) > 6 else None,
+            context=[part(d) for d in (e[5] if len(e) > 5 else [])],
+        )
+        for e in saved
+    ]
 
 
-def _steps(part: dict) -> int:
-    return int(part["goals"].shape[1])
-
-
-def last_steps(parts: list[dict], n: int) -> list[dict]:
-    """The last `n` steps (or all there are) of consecutive parts, as views."""
-    out: list[dict] = []
-    need = n
-    for part in reversed(parts):
-        if need <= 0:
-            break
-        k = _steps(part)
-        out.insert(0, part if k <= need else {key: slice_time(v, k - need, None) for key, v in part.items()})
-        need -= min(k, need)
-    return out
-
-
-def with_context(entry: tuple, prefix: int) -> dict:
-    """The entry's chunk after exactly `prefix` context steps (N, prefix + T, ...). A context shorter than
-    `prefix` (the first rollouts of a run) is padded in front with steps marked as episode starts, which
-    nothing attends to: those chunks begin with every env's first step."""
-    parts = [*_context_of(entry), _chunk_of(entry)] if prefix > 0 else [_chunk_of(entry)]
-    seq = functools.reduce(lambda a, b: {k: cat_time(a[k], b[k]) for k in a}, parts)
-    missing = prefix - sum(_steps(q) for q in parts[:-1])
-    if missing > 0:
-        seq = {k: cat_time(pad_time(v, missing, k == "starts"), v) for k, v in seq.items()}
-    return seq
-
-
-def start_states(policy, entries: list[tuple], dev) -> tuple:
+def start_states(policy, entries: list[Chunk], dev) -> tuple:
     """The LSTM (h, c) of the entries' chunks at their starts, joined over envs (zeros where none was kept)."""
-    states = [e[6] if len(e) > 6 and e[6] is not None else policy.init_state(e[1].shape[0], "cpu") for e in entries]
+    states = [policy.init_state(e.goals.shape[0], "cpu") if e.state0 is None else e.state0 for e in entries]
     return tuple(torch.cat([s[j].to(dev) for s in states], 1) for j in range(2))
 
 
