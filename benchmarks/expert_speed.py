@@ -31,9 +31,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ovon.config.sim import AgentConfig  # noqa: E402
-from ovon.experts import STOP, FrontierExpert, FrontierExpertConfig  # noqa: E402
+from ovon.experts import FrontierExpert, FrontierExpertConfig  # noqa: E402
 from ovon.experts.gridsim import grid_from_arrays, room_grid  # noqa: E402
-from ovon.sim.agent import Kinematics  # noqa: E402
+from ovon.sim.agent import STOP, Kinematics  # noqa: E402
 from ovon.sim.geodesic import distance_field  # noqa: E402
 from ovon.sim.types import AgentState  # noqa: E402
 

@@ -7,14 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from ovon.experts import (
-    MOVE_FORWARD,
-    STOP,
-    FrontierExpert,
-    FrontierExpertConfig,
-    ShortestPathExpert,
-)
+from ovon.experts import FrontierExpert, FrontierExpertConfig, ShortestPathExpert
 from ovon.experts.gridsim import grid_from_arrays, rollout, room_grid
+from ovon.sim.agent import MOVE_FORWARD, STOP
 from ovon.sim.geodesic import distance_field
 from ovon.sim.types import AgentState
 

@@ -15,7 +15,8 @@ from ovon.agents.modular.config import LiftConfig
 from ovon.agents.modular.lifting import GoalMemory
 from ovon.agents.modular.sensors import DepthProjector, pose_from_odometry
 from ovon.env.core import ObjectNavEnv
-from ovon.models.detectors import DetectorConfig, detector_preset, make_detector
+from ovon.models.config import DetectorConfig, detector_preset
+from ovon.models.detectors import make_detector
 from ovon.models.encoders import FunctionTextEncoder, ModelNotAvailableError
 from ovon.task.episode import EpisodeSpec
 from tests.modular_scene import OBJECTS, portrait_sim, two_room_scene
@@ -98,8 +99,8 @@ def test_detector_presets_and_bad_values():
     assert detector_preset("perfect").miss_rate == 0 and detector_preset("noisy").fp_rate > 0
     with pytest.raises(ValueError, match="unknown detector preset 'great'"):
         detector_preset("great")
-    with pytest.raises(ValueError, match="miss_rate"):
-        DetectorConfig(miss_rate=1.5)
+    with pytest.raises(ValueError, match=r"detector.miss_rate = 1.5: expected a number in \[0, 1\]"):
+        make_detector(DetectorConfig(miss_rate=1.5))
     with pytest.raises(ValueError, match="detector.kind"):
         make_detector(DetectorConfig(kind="yolo"))
 

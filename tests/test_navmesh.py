@@ -299,9 +299,9 @@ def test_episode_and_expert_on_a_navmesh_scene(tmp_path):
     from ovon.config.sim import CameraConfig
     from ovon.config.task import TaskConfig
     from ovon.env import ObjectNavEnv
-    from ovon.experts import STOP, ShortestPathExpert
+    from ovon.experts import ShortestPathExpert
     from ovon.experts.gridsim import rollout
-    from ovon.sim.agent import MOVE_FORWARD
+    from ovon.sim.agent import MOVE_FORWARD, STOP
     from ovon.sim.world import build_world
     from ovon.task.episode import EpisodeSpec
     from ovon.task.setup import prepare_episode

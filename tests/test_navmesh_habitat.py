@@ -13,8 +13,9 @@ import pytest
 import torch
 
 from ovon.config.sim import NavConfig
-from ovon.experts import STOP, ShortestPathExpert
+from ovon.experts import ShortestPathExpert
 from ovon.experts.gridsim import rollout
+from ovon.sim.agent import STOP
 from ovon.sim.geodesic import distance_field
 from ovon.sim.navmesh import load_navmesh, read_navmesh
 from ovon.sim.navmesh.agreement import (

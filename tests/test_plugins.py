@@ -25,7 +25,8 @@ def test_a_module_in_the_working_directory_loads(tmp_path, monkeypatch) -> None:
     (tmp_path / "my_scorer_mod.py").write_text("class S:\n    def __init__(self, cfg):\n        self.cfg = cfg\n")
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
-    from ovon.models.scorers import ScorerConfig, make_scorer
+    from ovon.models.config import ScorerConfig
+    from ovon.models.scorers import make_scorer
 
     assert type(make_scorer(ScorerConfig(kind="my_scorer_mod:S"))).__name__ == "S"
 
@@ -33,12 +34,14 @@ def test_a_module_in_the_working_directory_loads(tmp_path, monkeypatch) -> None:
 @pytest.mark.parametrize("factory", ["detector", "scorer"])
 def test_factories_name_their_key(factory: str) -> None:
     if factory == "detector":
-        from ovon.models.detectors import DetectorConfig, make_detector
+        from ovon.models.config import DetectorConfig
+        from ovon.models.detectors import make_detector
 
         with pytest.raises(PluginError, match=r"^detector.kind = 'no_such_pkg_x:D': cannot import"):
             make_detector(DetectorConfig(kind="no_such_pkg_x:D"))
     else:
-        from ovon.models.scorers import ScorerConfig, make_scorer
+        from ovon.models.config import ScorerConfig
+        from ovon.models.scorers import make_scorer
 
         with pytest.raises(PluginError, match=r"^value.scorer.kind = 'no_such_pkg_x:D': cannot import"):
             make_scorer(ScorerConfig(kind="no_such_pkg_x:D"))
@@ -66,12 +69,14 @@ def test_one_dispatch_for_built_ins_and_plug_ins() -> None:
 @pytest.mark.parametrize("factory", ["detector", "scorer", "navigator"])
 def test_factories_refuse_an_unknown_name_in_one_line(factory: str) -> None:
     if factory == "detector":
-        from ovon.models.detectors import DetectorConfig, make_detector
+        from ovon.models.config import DetectorConfig
+        from ovon.models.detectors import make_detector
 
         with pytest.raises(PluginError, match=r"^detector.kind = 'nope' is unknown; use one of \['oracle', 'owlv2'\]"):
             make_detector(DetectorConfig(kind="nope"))
     elif factory == "scorer":
-        from ovon.models.scorers import ScorerConfig, make_scorer
+        from ovon.models.config import ScorerConfig
+        from ovon.models.scorers import make_scorer
 
         with pytest.raises(PluginError, match=r"^value.scorer.kind = 'nope' is unknown; use one of \['oracle-vl'"):
             make_scorer(ScorerConfig(kind="nope"))

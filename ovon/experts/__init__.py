@@ -1,7 +1,6 @@
 """Privileged experts: frontier exploration (the paper's DAgger teacher) and shortest path."""
 
 from ovon.experts.config import FrontierExpertConfig, ShortestPathExpertConfig
-from ovon.experts.control import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.experts.frontier_expert import FrontierExpert
 from ovon.experts.shortest_path import ShortestPathExpert
 
@@ -10,8 +9,4 @@ __all__ = [
     "FrontierExpertConfig",
     "ShortestPathExpert",
     "ShortestPathExpertConfig",
-    "STOP",
-    "MOVE_FORWARD",
-    "TURN_LEFT",
-    "TURN_RIGHT",
 ]

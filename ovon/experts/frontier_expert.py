@@ -22,15 +22,7 @@ import numpy as np
 from scipy import ndimage
 
 from ovon.experts.config import FrontierExpertConfig
-from ovon.experts.control import (
-    STOP,
-    Steering,
-    frontier_search,
-    heading_error,
-    lookahead_index,
-    nearest_path_index,
-    trace_parents,
-)
+from ovon.experts.control import nearest_path_index
 from ovon.experts.rig import Embodiment
 from ovon.experts.shortest_path import (
     DistanceFieldFn,
@@ -40,7 +32,9 @@ from ovon.experts.shortest_path import (
     default_distance_field_fn,
 )
 from ovon.maps.frontiers import FrontierMap
+from ovon.maps.planner import Steering, frontier_search, heading_error, lookahead_index, trace_parents
 from ovon.maps.visibility import ExploredMap
+from ovon.sim.agent import STOP
 from ovon.sim.types import AgentState
 
 

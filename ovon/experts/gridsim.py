@@ -11,8 +11,7 @@ import numpy as np
 from scipy import ndimage
 
 from ovon.config.sim import AgentConfig
-from ovon.experts.control import STOP
-from ovon.sim.agent import Kinematics
+from ovon.sim.agent import STOP, Kinematics
 from ovon.sim.navgrid import NavGrid
 from ovon.sim.types import AgentState
 

@@ -14,15 +14,10 @@ from typing import Any
 import numpy as np
 
 from ovon.experts.config import ShortestPathExpertConfig
-from ovon.experts.control import (
-    STOP,
-    Steering,
-    descend_path,
-    heading_error,
-    lookahead_index,
-    turn_action_to_yaw,
-)
+from ovon.experts.control import descend_path, turn_action_to_yaw
 from ovon.experts.rig import Embodiment
+from ovon.maps.planner import Steering, heading_error, lookahead_index
+from ovon.sim.agent import STOP
 from ovon.sim.types import AgentState
 
 Viewpoint = tuple[Any, float]  # (position (3,), yaw)

@@ -1,4 +1,5 @@
-"""Model configs: which perception encoders feed the policy, and the policy's size.
+"""Model configs: which perception encoders feed the policy, the policy's size, the modular agents' goal
+detector and image-text scorer, and their presets.
 
 Why a dataclass per part: every number of docs/spec.md#baselines is a config value, so a YAML file or a
 `key=value` override (see `ovon.config.base`) can change it and a wrong key fails loudly.
@@ -25,6 +26,10 @@ from ovon.config.base import (
 
 ImageEncoderName = Literal["oracle-vl", "siglip", "cnn", "depth-grid"]
 TextEncoderName = Literal["minilm-text", "siglip-text"]
+DEFAULT_SIGLIP = "google/siglip-base-patch16-256"
+DEFAULT_OWLV2 = "google/owlv2-base-patch16-ensemble"
+# a prompt the goal text is inserted into (`prompt.format(goal=...)`)
+GOAL_PROMPT = Pattern(r"(?s).*\{goal\}.*", "a string containing {goal}")
 
 
 @dataclass(frozen=True)
@@ -40,7 +45,7 @@ class EncoderConfig:
     image: ImageEncoderName = "oracle-vl"
     text: TextEncoderName = "minilm-text"
     # SigLIP: a hub id found in the local HF cache, or a folder written by `save_pretrained`.
-    siglip_model: str = non_empty("google/siglip-base-patch16-256")
+    siglip_model: str = non_empty(DEFAULT_SIGLIP)
     siglip_normalize: bool = True  # L2-normalise SigLIP embeddings (cosine-ready)
     # Where SigLIP runs (in each env worker for training, in the agent for evaluation); a torch device name,
     # not `auto`: the workers do not share the learner's GPU unless asked to.
@@ -115,6 +120,45 @@ class PolicyConfig:
     )
 
 
+@dataclass(frozen=True)
+class DetectorConfig:
+    """The modular agents' goal detector. `kind`: "oracle" (ORACLE DETECTION from the semantic frame),
+    "owlv2" (the paper's detector, local Hugging Face cache only) or "package.module:Class" (constructed
+    with this config)."""
+
+    kind: str = "oracle"
+    # oracle: a goal instance (the goal category or one of its children) is a candidate when it covers at
+    # least `min_frame_share` of the frame; each candidate is missed with probability `miss_rate`.
+    min_frame_share: float = in_range(0.01, 0, 1)
+    miss_rate: float = in_range(0.0, 0, 1)
+    # oracle false positives: each visible non-goal instance (same minimum share) is reported as the goal
+    # with probability fp_rate * clip((s - fp_min_similarity) / (1 - fp_min_similarity), 0, 1) ** fp_power,
+    # s = MiniLM cosine between its category and the goal text (couch-sofa 0.86, couch-toaster 0.25).
+    fp_rate: float = in_range(0.0, 0, 1)
+    fp_min_similarity: float = in_range(0.4, 0, 1, hi_open=True)
+    fp_power: float = positive(2.0)
+    seed: int = 0
+    # owlv2
+    owlv2_model: str = DEFAULT_OWLV2  # hub id in the local HF cache, or a folder written by save_pretrained
+    owlv2_threshold: float = in_range(0.3, 0, 1)  # keep boxes scoring above this
+    owlv2_prompt: str = constrained("a photo of a {goal}", GOAL_PROMPT)
+    device: str = "cpu"
+
+
+@dataclass(frozen=True)
+class ScorerConfig:
+    """VLFM's image-text value scorer. `kind`: "oracle-vl", "siglip", "constant" or "package.module:Class"
+    (see `ovon.models.scorers`)."""
+
+    kind: str = "oracle-vl"
+    # the text scored against the image; VLFM used "Seems like there is a {goal} ahead." with BLIP-2
+    prompt: str = constrained("{goal}", GOAL_PROMPT)
+    siglip_model: str = DEFAULT_SIGLIP
+    oracle_noise_std: float = non_negative(0.0)  # oracle-vl noise (see OracleVLEncoder)
+    oracle_dropout: float = in_range(0.0, 0, 1)
+    device: str = "cpu"
+
+
 def text_aligned_parts(cfg: EncoderConfig) -> int:
     """How many goal-text-space vectors (each `text_dim` long) open the image embedding."""
     if cfg.image == "oracle-vl":
@@ -144,8 +188,19 @@ def _policy_presets() -> dict[str, PolicyConfig]:
     }
 
 
+def _detector_presets() -> dict[str, DetectorConfig]:
+    return {
+        # every goal instance covering >= 1% of the frame, nothing else (the task's own "seen" threshold)
+        "perfect": DetectorConfig(),
+        # an imperfect open-vocabulary detector (rates argued in the README, "Modular baselines")
+        "noisy": DetectorConfig(min_frame_share=0.02, miss_rate=0.3, fp_rate=0.3, fp_min_similarity=0.4),
+        "owlv2": DetectorConfig(kind="owlv2"),
+    }
+
+
 ENCODER_PRESETS = _encoder_presets()
 POLICY_PRESETS = _policy_presets()
+DETECTOR_PRESETS = _detector_presets()
 
 
 def encoder_preset(name: str) -> EncoderConfig:
@@ -160,3 +215,10 @@ def policy_preset(name: str, **overrides: object) -> PolicyConfig:
     if name not in POLICY_PRESETS:
         raise KeyError(f"unknown policy preset {name!r}; valid: {sorted(POLICY_PRESETS)}")
     return dataclasses.replace(POLICY_PRESETS[name], **overrides)
+
+
+def detector_preset(name: str, **overrides: object) -> DetectorConfig:
+    """Named detector preset with optional field overrides; an unknown name lists the valid ones."""
+    if name not in DETECTOR_PRESETS:
+        raise ValueError(f"unknown detector preset {name!r}; valid: {sorted(DETECTOR_PRESETS)}")
+    return dataclasses.replace(DETECTOR_PRESETS[name], **overrides)

@@ -8,17 +8,17 @@ Protocol: `score(observation, goal_text) -> float` (a cosine for the built-ins),
   Hugging Face cache only), the open replacement for VLFM's BLIP-2 ITC score;
 * "constant": 1 for every frame (frontier choice falls back to the nearest frontier: plain frontier
   exploration, an ablation);
-* "package.module:Class": your own, constructed with the `ScorerConfig`.
+* "package.module:Class": your own, constructed with the `ScorerConfig` (`ovon.models.config`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from ovon.models.encoders.siglip import DEFAULT_SIGLIP
+from ovon.config.base import validate, values_from_option
+from ovon.models.config import ScorerConfig
 from ovon.plugins import load_named
 
 BUILTIN: dict[str, str] = {
@@ -27,25 +27,6 @@ BUILTIN: dict[str, str] = {
     "constant": "ovon.models.scorers:ConstantScorer",
 }
 SCORERS = tuple(BUILTIN)
-
-
-@dataclass(frozen=True)
-class ScorerConfig:
-    kind: str = "oracle-vl"
-    # the text scored against the image; VLFM used "Seems like there is a {goal} ahead." with BLIP-2
-    prompt: str = "{goal}"
-    siglip_model: str = DEFAULT_SIGLIP
-    oracle_noise_std: float = 0.0  # oracle-vl noise (see OracleVLEncoder)
-    oracle_dropout: float = 0.0
-    device: str = "cpu"
-
-    def __post_init__(self) -> None:
-        if "{goal}" not in self.prompt:
-            raise ValueError(f"value.prompt {self.prompt!r} must contain {{goal}}")
-        if not 0.0 <= self.oracle_dropout <= 1.0:
-            raise ValueError(f"value.oracle_dropout = {self.oracle_dropout!r} is outside [0, 1]")
-        if self.oracle_noise_std < 0:
-            raise ValueError(f"value.oracle_noise_std = {self.oracle_noise_std!r} must be >= 0")
 
 
 @runtime_checkable
@@ -145,8 +126,11 @@ class ConstantScorer:
 
 
 def make_scorer(cfg: ScorerConfig | None = None, text_encoder=None) -> ImageTextScorer:
-    """The scorer `cfg.kind` names; built-ins get the shared goal-text encoder, plug-ins only the config."""
+    """The scorer `cfg.kind` names; built-ins get the shared goal-text encoder, plug-ins only the config.
+    A value outside its declared domain is one line, as from `--agent-arg`."""
     cfg = cfg or ScorerConfig()
+    with values_from_option("--agent-arg"):
+        validate(cfg, "value.scorer")
     cls = load_named(cfg.kind, BUILTIN, "value.scorer.kind")
     return cls(cfg, text_encoder) if cfg.kind in BUILTIN else cls(cfg)
 

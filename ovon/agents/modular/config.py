@@ -11,57 +11,61 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Literal, TypeVar
+from pathlib import Path
+from typing import Any, ClassVar, Literal, TypeVar
 
-from ovon.config.base import ConfigError, merge
-from ovon.models.detectors.config import DetectorConfig, detector_preset
-from ovon.models.scorers import ScorerConfig
+from ovon.config.base import (
+    ConfigError,
+    in_range,
+    merge,
+    non_negative,
+    positive,
+    rule,
+    validate,
+    values_from_option,
+)
+from ovon.models.config import DetectorConfig, ScorerConfig, detector_preset
 
 
 @dataclass(frozen=True)
 class MapConfig:
     """The agent's own top-down maps, from depth + odometry only."""
 
-    cell_size_m: float = 0.05  # 5 cm cells
-    size_m: float = 50.0  # square map centred on the start pose (VLFM: 1000 x 1000 cells)
+    cell_size_m: float = positive(0.05)  # 5 cm cells
+    size_m: float = positive(50.0)  # square map centred on the start pose (VLFM: 1000 x 1000 cells)
     # depth points whose height above the floor lies in [min, max] are obstacles; None = the agent's height
     obstacle_min_height_m: float = 0.15
     obstacle_max_height_m: float | None = None
     inflation_radius_m: float | None = None  # None = the agent's radius
-    view_range_m: float = 5.0  # explored area: the camera cone up to this range, with line of sight
-    pocket_area_m2: float = 1.5  # unexplored pockets smaller than this count as explored
+    view_range_m: float = positive(5.0)  # explored area: the camera cone up to this range, with line of sight
+    pocket_area_m2: float = positive(1.5)  # unexplored pockets smaller than this count as explored
     min_frontier_m: float = 0.15  # frontiers shorter than this are ignored
-    pixel_stride: int = 1  # back-project every n-th pixel (rows and columns)
+    pixel_stride: int = in_range(1, 1, None)  # back-project every n-th pixel (rows and columns)
     bump_obstacles: bool = True  # a blocked MOVE_FORWARD (the `collided` bump sensor) marks the cell ahead
 
-    def __post_init__(self) -> None:
-        _positive(self, "maps", ("cell_size_m", "size_m", "view_range_m", "pocket_area_m2"))
-        if self.pixel_stride < 1:
-            raise ValueError(f"maps.pixel_stride = {self.pixel_stride!r} must be >= 1")
-        top = self.obstacle_max_height_m
-        if top is not None and top <= self.obstacle_min_height_m:
-            raise ValueError(
-                f"maps.obstacle_max_height_m = {top!r} must be above maps.obstacle_min_height_m = "
-                f"{self.obstacle_min_height_m!r}"
-            )
+    rules: ClassVar = (
+        rule(
+            ("obstacle_min_height_m", "obstacle_max_height_m"),
+            lambda lo, hi: hi is None or hi > lo,
+            "obstacle_max_height_m > obstacle_min_height_m (or null)",
+        ),
+    )
 
 
 @dataclass(frozen=True)
 class LiftConfig:
     """Detections -> 3D goal points (depth + odometry pose)."""
 
-    mask_erode_px: int = 1  # erode masks (edge pixels mix object and background depth); VLFM: 5 at 640x480
-    box_shrink: float = 0.5  # box-only detections: keep the central part (fraction removed)
-    max_points: int = 2000  # stored goal points per episode (oldest dropped first)
-    points_per_detection: int = 256  # evenly spaced subset of a detection's pixels (bounds the cost)
+    # erode masks (edge pixels mix object and background depth); VLFM: 5 at 640x480
+    mask_erode_px: int = non_negative(1)
+    # box-only detections: keep the central part (fraction removed)
+    box_shrink: float = in_range(0.5, 0, 1, hi_open=True)
+    max_points: int = in_range(2000, 1, None)  # stored goal points per episode (oldest dropped first)
+    # evenly spaced subset of a detection's pixels (bounds the cost)
+    points_per_detection: int = in_range(256, 1, None)
     min_range_m: float = 0.0  # ignore lifted points closer than this to the camera
-    max_range_fraction: float = 0.95  # ignore points beyond this fraction of the depth range (no hit / far)
-
-    def __post_init__(self) -> None:
-        if self.mask_erode_px < 0 or self.max_points < 1 or self.points_per_detection < 1:
-            raise ValueError("lifting.mask_erode_px must be >= 0, max_points and points_per_detection >= 1")
-        if not 0.0 <= self.box_shrink < 1.0 or not 0.0 < self.max_range_fraction <= 1.0:
-            raise ValueError("lifting.box_shrink must be in [0, 1) and lifting.max_range_fraction in (0, 1]")
+    # ignore points beyond this fraction of the depth range (no hit / far)
+    max_range_fraction: float = in_range(0.95, 0, 1, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -71,17 +75,19 @@ class NavigatorConfig:
     # geometric (A* on the agent's own obstacle map) | learned (a PointNav policy: `checkpoint`) |
     # package.module:Class
     kind: str = "geometric"
-    stop_distance_m: float = 0.9  # STOP when the goal point is this close (planar distance)
-    turn_threshold_deg: float = 30.0  # turn when the next waypoint is more than this off the heading
-    lookahead_m: float = 1.0  # furthest path cell in line of sight used as the heading target
-    goal_ring_bins: int = 12  # plan to the nearest free cell in each of this many directions around a goal
-    escape_radius_m: float = 0.5  # on a cell its map blocks, the agent first heads to a free cell this close
+    stop_distance_m: float = positive(0.9)  # STOP when the goal point is this close (planar distance)
+    turn_threshold_deg: float = positive(30.0)  # turn when the next waypoint is more than this off the heading
+    lookahead_m: float = positive(1.0)  # furthest path cell in line of sight used as the heading target
+    # plan to the nearest free cell in each of this many directions around a goal
+    goal_ring_bins: int = in_range(12, 1, None)
+    # on a cell its map blocks, the agent first heads to a free cell this close
+    escape_radius_m: float = positive(0.5)
     # geometric: STOP after this many steps within one forward step of the stop radius without getting closer
-    settle_steps: int = 12
+    settle_steps: int = in_range(12, 1, None)
     checkpoint: str = ""  # for learned navigators: policy.pt of `ovon train --task pointnav` (or its run folder)
     # learned: the policy's memory restarts when the target moves further than this (a new frontier, or a
     # goal point lifted elsewhere); smaller moves are the same target seen better
-    retarget_m: float = 0.5
+    retarget_m: float = positive(0.5)
     # learned: argmax actions instead of sampling (seeded at each episode's reset, so runs repeat); argmax
     # locks into turn-left / turn-right cycles more often (PointNav on held-out houses: 62% vs 70% SR)
     deterministic: bool = False
@@ -90,12 +96,12 @@ class NavigatorConfig:
     # maximum (task.point_max_distance_m, geodesic). A goal vector alone says nothing about walls: a frontier
     # 8-10 m away behind a wall, out of the 1-6 m the policy trained on, had it bump into that wall until the
     # step limit
-    subgoal_m: float = 0.0
+    subgoal_m: float = non_negative(0.0)
     # learned: the route point given to the policy stays fixed while it is further than this from the agent
     # and the target moved less than retarget_m, as a PointNav goal does in training. 0 = a new point along
     # the route every step: on a route longer than subgoal_m the point then slides ahead of the agent and
     # every slide over retarget_m restarts the policy's memory
-    waypoint_keep_m: float = 0.0
+    waypoint_keep_m: float = non_negative(0.0)
     # learned: when the policy picks a MOVE_FORWARD that the agent's map says is blocked (the agent standing
     # on a cell the map holds navigable), the geometric navigator drives the next `stuck_steps` steps (its
     # detour, then the route; with stuck_steps 0 only that step). Without it the policy drove through gaps
@@ -106,43 +112,26 @@ class NavigatorConfig:
     # learned: within stop_distance_m + this of a goal point the geometric navigator takes over (its final
     # approach and settle rule). The policy learned to reach a floor point within 0.36 m with its own STOP;
     # a goal point on an object, reached at 0.9 m with that STOP masked, is another task. 0 = never
-    handover_m: float = 0.25
+    handover_m: float = non_negative(0.25)
     # learned: when the policy moved less than one forward step over its last `stuck_steps` steps with a bump
     # among them, the geometric navigator drives the next `stuck_steps` steps. The policy, pushed against a
     # wall, alternates MOVE_FORWARD (bump) and a turn for hundreds of steps; 8 = the 6 turns that face any
     # direction plus 2. 0 = never
-    stuck_steps: int = 8
+    stuck_steps: int = non_negative(8)
 
-    def __post_init__(self) -> None:
-        _positive(
-            self, "navigator", ("stop_distance_m", "turn_threshold_deg", "lookahead_m", "escape_radius_m", "retarget_m")
-        )
-        if self.kind == "learned":
-            from pathlib import Path
+    rules: ClassVar = (
+        rule(
+            ("kind", "checkpoint"),
+            lambda kind, checkpoint: kind != "learned" or _is_policy_file(checkpoint),
+            "checkpoint = the policy.pt of `ovon train --task pointnav` (or its run folder) when kind = learned",
+        ),
+    )
 
-            path = (
-                Path(self.checkpoint) / "policy.pt"
-                if self.checkpoint and Path(self.checkpoint).is_dir()
-                else Path(self.checkpoint)
-            )
-            if not self.checkpoint or not path.is_file():
-                raise ValueError(
-                    f"navigator.checkpoint = {self.checkpoint!r} is not a policy file; fix: "
-                    "--agent-arg navigator.checkpoint=PATH to the policy.pt of `ovon train --task "
-                    "pointnav` (or its run folder)"
-                )
-        if self.subgoal_m < 0 or self.handover_m < 0 or self.waypoint_keep_m < 0:
-            raise ValueError(
-                f"navigator.subgoal_m = {self.subgoal_m!r}, navigator.handover_m = "
-                f"{self.handover_m!r} and navigator.waypoint_keep_m = {self.waypoint_keep_m!r} "
-                "must be >= 0"
-            )
-        if self.goal_ring_bins < 1:
-            raise ValueError(f"navigator.goal_ring_bins = {self.goal_ring_bins!r} must be >= 1")
-        if self.stuck_steps < 0:
-            raise ValueError(f"navigator.stuck_steps = {self.stuck_steps!r} must be >= 0")
-        if self.settle_steps < 1:
-            raise ValueError(f"navigator.settle_steps = {self.settle_steps!r} must be >= 1")
+
+def _is_policy_file(checkpoint: str) -> bool:
+    """A policy file, or a run folder holding one (`navigator.checkpoint` of a learned navigator)."""
+    path = Path(checkpoint) / "policy.pt" if checkpoint and Path(checkpoint).is_dir() else Path(checkpoint)
+    return bool(checkpoint) and path.is_file()
 
 
 @dataclass(frozen=True)
@@ -160,30 +149,26 @@ class ValueMapConfig:
     """Language value map and frontier choice (docs/spec.md#value-map, #frontier-choice)."""
 
     scorer: ScorerConfig = field(default_factory=ScorerConfig)
-    min_confidence: float = 0.25  # confidence at the edge of the view cone (1 on the optical axis)
+    # confidence at the edge of the view cone (1 on the optical axis)
+    min_confidence: float = in_range(0.25, 0, 1, lo_open=True)
     decision_threshold: float = 0.35  # new values below this and below the stored confidence are dropped
-    frontier_radius_m: float = 0.5  # a frontier's value = median of the non-zero values within this radius
+    # a frontier's value = median of the non-zero values within this radius
+    frontier_radius_m: float = positive(0.5)
     hysteresis: float = 0.01  # keep the previous frontier unless another is better by more than this
-    keep_radius_m: float = 0.5  # the previous frontier "still exists" when a frontier waypoint is this close
-
-    def __post_init__(self) -> None:
-        _positive(self, "value", ("frontier_radius_m", "keep_radius_m"))
-        if not 0.0 < self.min_confidence <= 1.0:
-            raise ValueError(f"value.min_confidence = {self.min_confidence!r} must be in (0, 1]")
+    # the previous frontier "still exists" when a frontier waypoint is this close
+    keep_radius_m: float = positive(0.5)
 
 
 @dataclass(frozen=True)
 class VLFMConfig(ModularConfig):
     value: ValueMapConfig = field(default_factory=ValueMapConfig)
-    spin_steps: int = 12  # TURN_LEFT steps at the start (12 x 30 deg = a full turn)
+    spin_steps: int = non_negative(12)  # TURN_LEFT steps at the start (12 x 30 deg = a full turn)
     frontier_reached_m: float = 0.5  # a frontier this close counts as reached: choose again
-    stuck_steps: int = 20  # no progress toward a frontier for this many steps: abandon it (blacklist)
-    max_choices_per_step: int = 8  # frontiers tried in one step when chosen ones turn out unreachable
+    # no progress toward a frontier for this many steps: abandon it (blacklist)
+    stuck_steps: int = in_range(20, 1, None)
+    # frontiers tried in one step when chosen ones turn out unreachable
+    max_choices_per_step: int = in_range(8, 1, None)
     no_frontier: Literal["stop"] = "stop"  # what to do when no frontier is left (VLFM: STOP)
-
-    def __post_init__(self) -> None:
-        if self.spin_steps < 0 or self.stuck_steps < 1 or self.max_choices_per_step < 1:
-            raise ValueError("spin_steps must be >= 0, stuck_steps and max_choices_per_step >= 1")
 
 
 @dataclass(frozen=True)
@@ -194,13 +179,6 @@ class DAgRLODConfig(ModularConfig):
     deterministic: bool = False  # argmax actions (else sample at `temperature`)
     temperature: float = 0.5
     threads: int = 1
-
-
-def _positive(cfg: Any, group: str, names: tuple[str, ...]) -> None:
-    for n in names:
-        v = getattr(cfg, n)
-        if not v > 0:
-            raise ValueError(f"{group}.{n} = {v!r} must be > 0")
 
 
 def _paper(base: ModularConfig) -> dict[str, Any]:
@@ -217,12 +195,22 @@ def _paper(base: ModularConfig) -> dict[str, Any]:
 
 PRESETS = ("cpu", "paper")
 C = TypeVar("C", bound=ModularConfig)
+T = TypeVar("T")
+
+
+def checked(cfg: T, where: str) -> T:
+    """`cfg` (the `where` part of a modular config) validated against its declared domains. Why: the parts
+    also take configs built in Python, which no `merge` has checked; a bad value is one line naming its
+    `--agent-arg` key."""
+    with values_from_option("--agent-arg"):
+        return validate(cfg, where)
 
 
 def modular_config(cls: type[C], preset: str = "cpu", overrides: dict[str, Any] | None = None) -> C:
     """Preset, then overrides: dotted keys ({"detector.miss_rate": 0.2}) or nested dicts; a string under
     "detector" names a detector preset ("perfect", "noisy", "owlv2"), applied before the other keys; a string
-    under "navigator" is its kind ("geometric", "learned", package.module:Class)."""
+    under "navigator" is its kind ("geometric", "learned", package.module:Class). Validated against the
+    declared domains; a bad value is one line naming its `--agent-arg` key."""
     if preset not in PRESETS:
         raise ConfigError(f"unknown modular preset {preset!r}; valid: {list(PRESETS)}")
     cfg = cls()
@@ -230,7 +218,7 @@ def modular_config(cls: type[C], preset: str = "cpu", overrides: dict[str, Any] 
         data = _paper(cfg)
         if not hasattr(cfg, "value"):
             data.pop("value")
-        cfg = merge(cfg, data, cls.__name__)
+        cfg = merge(cfg, data)
     overrides = dict(overrides or {})
     if isinstance(overrides.get("navigator"), str):  # navigator=learned is navigator.kind=learned
         overrides["navigator.kind"] = overrides.pop("navigator")
@@ -246,7 +234,5 @@ def modular_config(cls: type[C], preset: str = "cpu", overrides: dict[str, Any] 
         for p in parts[:-1]:
             node = node.setdefault(p, {})
         node[parts[-1]] = value
-    try:
-        return merge(cfg, nested, cls.__name__) if nested else cfg
-    except (TypeError, ValueError) as e:
-        raise ConfigError(f"{cls.__name__}: {e}") from None
+    with values_from_option("--agent-arg"):
+        return merge(cfg, nested) if nested else validate(cfg)

@@ -19,7 +19,7 @@ from ovon.agents.modular.maps import AgentMaps
 from ovon.agents.modular.navigation import NavRequest, PointGoalNavigator, make_navigator
 from ovon.agents.modular.sensors import Pose2D, Sensors, pose_from_odometry
 from ovon.models.detectors import describe_detector, make_detector
-from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD, STOP
+from ovon.sim.agent import LOOK_DOWN, LOOK_UP, MOVE_FORWARD
 
 
 def sensors_only(observation: dict) -> dict:
@@ -27,9 +27,10 @@ def sensors_only(observation: dict) -> dict:
     return {k: v for k, v in observation.items() if k != "privileged"}
 
 
-def episode_seed(info: dict) -> int:
-    """The episode's seed (stable across processes), for the detector's and scorer's noise and a sampling
-    navigator's draws."""
+def info_seed(info: dict) -> int:
+    """The seed the episode info carries (else one from its episode id, stable across processes), for the
+    detector's and scorer's noise and a sampling navigator's draws. Not `ovon.evaluate.runner.episode_seed`,
+    which computes that seed for the info."""
     s = info.get("seed")
     if s is not None:
         return int(s)
@@ -69,7 +70,7 @@ class ModularCore:
             self._build(sensors)
         assert self.maps is not None and self.navigator is not None and self.memory is not None
         self.maps.reset()
-        seed = episode_seed(episode_info)
+        seed = info_seed(episode_info)
         self.navigator.reset(seed)
         self.memory.reset()
         self.detector.reset(seed)
@@ -124,4 +125,4 @@ class ModularCore:
         return int(action)
 
 
-__all__ = ["ModularCore", "STOP", "episode_seed", "sensors_only"]
+__all__ = ["ModularCore", "info_seed", "sensors_only"]

@@ -17,12 +17,12 @@ import math
 
 import numpy as np
 
-from ovon.agents.modular.config import ValueMapConfig
+from ovon.agents.modular.config import ValueMapConfig, checked
 
 
 class FrontierChooser:
     def __init__(self, cfg: ValueMapConfig, cell_size: float) -> None:
-        self.cfg = cfg
+        self.cfg = checked(cfg, "value")
         self.keep_cells = cfg.keep_radius_m / cell_size
         self.reset()
 

@@ -161,7 +161,7 @@ class LearnedNavigator:
         }
         image = self.encoder.encode(batch).float()
         goal = torch.from_numpy(goal_vector(point.rho, point.theta))[None]
-        obs = self.policy.make_obs(image, goal)
+        obs = self.policy.embed(image, goal)
         logits, _, self.state = self.policy.act_step(obs, self.prev, self.state, torch.tensor([self.first]))
         logits = logits[0].clone()
         logits[STOP] = -math.inf

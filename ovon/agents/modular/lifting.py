@@ -10,14 +10,14 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ovon.agents.modular.config import LiftConfig
+from ovon.agents.modular.config import LiftConfig, checked
 from ovon.agents.modular.sensors import DepthProjector, Pose2D
 from ovon.models.detectors.base import Detection
 
 
 class GoalMemory:
     def __init__(self, cfg: LiftConfig, projector: DepthProjector) -> None:
-        self.cfg = cfg
+        self.cfg = checked(cfg, "lifting")
         self.projector = projector
         self.reset()
 

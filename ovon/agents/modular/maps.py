@@ -23,7 +23,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ovon.agents.modular.config import MapConfig
+from ovon.agents.modular.config import MapConfig, checked
 from ovon.agents.modular.sensors import DepthProjector, Pose2D, Sensors
 from ovon.maps import ExploredMap, FrontierMap, Frontiers
 
@@ -77,7 +77,7 @@ class AgentMaps:
     """Obstacle, navigability, explored and frontier maps in the episodic frame (start at the centre)."""
 
     def __init__(self, cfg: MapConfig, sensors: Sensors) -> None:
-        self.cfg = cfg
+        self.cfg = checked(cfg, "maps")
         self.sensors = sensors
         cs = float(cfg.cell_size_m)
         n = int(round(cfg.size_m / cs))

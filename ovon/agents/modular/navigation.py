@@ -23,14 +23,10 @@ from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 
-from ovon.agents.modular.config import NavigatorConfig
+from ovon.agents.modular.config import NavigatorConfig, checked
 from ovon.agents.modular.maps import AgentMaps
 from ovon.agents.modular.sensors import Pose2D, Sensors
-from ovon.experts.control import (
-    MOVE_FORWARD,
-    STOP,
-    TURN_LEFT,
-    TURN_RIGHT,
+from ovon.maps.planner import (
     Steering,
     action_towards,
     frontier_search,
@@ -39,6 +35,7 @@ from ovon.experts.control import (
     trace_parents,
 )
 from ovon.plugins import load_named
+from ovon.sim.agent import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.sim.collision import forward_delta
 
 
@@ -71,11 +68,11 @@ class PointGoalNavigator(Protocol):
 class GeometricNavigator:
     """A* on the agent's own navigability (re-planned every step as the map grows) + path following.
 
-    The plan is the frontier expert's multi-target A* (`ovon.experts.control.frontier_search`): for a goal
+    The plan is the multi-target A* the frontier expert uses too (`ovon.maps.planner.frontier_search`): for a goal
     point the targets are, in each of `goal_ring_bins` directions around it, the nearest navigable cell
     within the stop distance (the goal itself usually lies on an obstacle); for a frontier the waypoint.
     Heading: the furthest path cell within `lookahead_m` in line of sight; turn when it is more than
-    `turn_threshold_deg` off, else MOVE_FORWARD, with the expert's `Steering` detours around obstacles the
+    `turn_threshold_deg` off, else MOVE_FORWARD, with the planner's `Steering` detours around obstacles the
     map predicts (and the bump sensor reports). An agent standing on a cell its map calls blocked (an
     obstacle seen within its radius) first drives to the nearest navigable cell.
 
@@ -91,7 +88,7 @@ class GeometricNavigator:
     name = "geometric"
 
     def __init__(self, cfg: NavigatorConfig, maps: AgentMaps, sensors: Sensors) -> None:
-        self.cfg = cfg
+        self.cfg = checked(cfg, "navigator")
         self.maps = maps
         body = sensors.body
         self.steering = Steering(

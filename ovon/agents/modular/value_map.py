@@ -14,14 +14,14 @@ import math
 
 import numpy as np
 
-from ovon.agents.modular.config import ValueMapConfig
+from ovon.agents.modular.config import ValueMapConfig, checked
 from ovon.agents.modular.maps import AgentMaps
 from ovon.agents.modular.sensors import Pose2D
 
 
 class ValueMap:
     def __init__(self, cfg: ValueMapConfig, maps: AgentMaps) -> None:
-        self.cfg = cfg
+        self.cfg = checked(cfg, "value")
         self.maps = maps
         self.value = np.zeros(maps.shape, dtype=np.float32)
         self.confidence = np.zeros(maps.shape, dtype=np.float32)

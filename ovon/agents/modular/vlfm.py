@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ovon.agents.modular.config import VLFMConfig, modular_config
-from ovon.agents.modular.core import ModularCore, episode_seed
+from ovon.agents.modular.core import ModularCore, info_seed
 from ovon.agents.modular.debug import draw_beliefs
 from ovon.agents.modular.frontier_choice import FrontierChooser
 from ovon.agents.modular.value_map import ValueMap
@@ -75,7 +75,7 @@ class VLFMAgent:
         assert self.value_map is not None and self.chooser is not None
         self.value_map.reset()
         self.chooser.reset()
-        self.scorer.reset(episode_seed(episode_info))
+        self.scorer.reset(info_seed(episode_info))
         self.step = 0
         self.mode = "spin"
         self._progress_target = -1

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ovon.models.config import DetectorConfig
 from ovon.models.detectors.base import Detection, box_of
-from ovon.models.detectors.config import DetectorConfig
 
 
 class OracleDetector:

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from ovon.models.config import DetectorConfig
 from ovon.models.detectors.base import Detection
-from ovon.models.detectors.config import DetectorConfig
 from ovon.models.hf import load_pretrained
 
 

@@ -11,10 +11,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from ovon.models.config import DEFAULT_SIGLIP
 from ovon.models.encoders.base import ObsBatch, get_obs
 from ovon.models.hf import load_pretrained
-
-DEFAULT_SIGLIP = "google/siglip-base-patch16-256"
 
 
 def _missing_message(name_or_path: str, err: Exception) -> str:

@@ -9,8 +9,9 @@ from typing import Any
 
 import torch
 
+from ovon.models.config import DEFAULT_SIGLIP
 from ovon.models.encoders.base import CachedTextEncoder
-from ovon.models.encoders.siglip import DEFAULT_SIGLIP, load_siglip
+from ovon.models.encoders.siglip import load_siglip
 
 
 class MiniLMText(CachedTextEncoder):

@@ -15,7 +15,8 @@ import numpy as np
 from scipy import ndimage
 
 from ..vocabulary import Category, Vocabulary
-from .layout import HouseConfig, Layout, Room
+from .config import HouseConfig
+from .layout import Layout, Room
 from .shapes import surface_top
 
 # families that stand with their back against a wall; families that usually stand free

@@ -28,8 +28,9 @@ import numpy as np
 
 from ..model import Mesh, ObjectInstance, Region, Scene
 from ..vocabulary import Vocabulary, load_vocabulary
+from .config import HouseConfig
 from .furnish import Furnisher, rotation
-from .layout import HouseConfig, make_layout
+from .layout import make_layout
 from .shapes import box_mesh, build_shape
 
 _ALNUM = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
