@@ -162,7 +162,7 @@ def replay_stops(run: Path) -> dict:
     from ovon.config.sim import SimConfig
     from ovon.config.task import TaskConfig
     from ovon.env import make_objectnav
-    from ovon.evaluate.harness import load_specs
+    from ovon.dataset.episodes import load_specs
     from ovon.evaluate.runner import episode_info, episode_seed
 
     meta = json.loads((run / "run.json").read_text())
@@ -177,11 +177,11 @@ def replay_stops(run: Path) -> dict:
     specs = {}
     for split in sorted({r["split"] for r in failed}):
         for s in load_specs(meta["data"], meta["scenes"], split, None):
-            specs[(split, s.scene, s.episode_id)] = s
+            specs[(split, s.scene_key, s.episode_id)] = s
     out = []
     for rec in failed:
         spec = specs[(rec["split"], rec["scene"], str(rec["episode_id"]))]
-        ep_seed = episode_seed(rec["seed"], spec.split, spec.episode_id, spec.scene)
+        ep_seed = episode_seed(rec["seed"], spec.split, spec.episode_id, spec.scene_key)
         env = make_objectnav(episodes=[spec], sim=sim, task=task, privileged=True)
         obs, info = env.reset(seed=ep_seed, options={"episode": spec})
         agent.reset(episode_info(spec, ep_seed, sim))

@@ -233,6 +233,32 @@ class FileLock:
             return
         raise RunFolderError(str(busy).format(holder="the lock file keeps changing"))
 
+    @staticmethod
+    def holder(path: str | Path) -> str | None:
+        """Who holds the lock on `path` right now ("pid N on HOST, since ..."), None when nobody does.
+        Creates nothing: a status check may run on a read-only folder."""
+        path = Path(path)
+        if fcntl is None:  # pragma: no cover - Windows
+            try:
+                held = json.loads(path.read_text())
+            except FileNotFoundError:
+                return None
+            except (OSError, ValueError):
+                return _holder(path)
+            alive = held.get("host") != socket.gethostname() or _pid_alive(int(held.get("pid", -1)))
+            return _holder(path) if alive else None
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except OSError:
+            return None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            return None
+        except OSError:
+            return _holder(path)
+        finally:
+            os.close(fd)
+
     def release(self) -> None:
         if self.fd is None:
             return

@@ -20,7 +20,6 @@ from rich.console import Console
 
 from ovon.experiments import (
     DefinitionError,
-    build_report,
     experiment_names,
     load_catalogue,
     load_experiment,
@@ -28,6 +27,7 @@ from ovon.experiments import (
     resolve,
     run,
     select,
+    write_experiment_report,
 )
 from ovon.experiments.plan import train_spec
 from ovon.experiments.report import experiment_results
@@ -350,7 +350,7 @@ def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path
         "eval:t-ft": 1,
     }
 
-    report = build_report(plan, tmp_path / "report")
+    report = write_experiment_report(plan, tmp_path / "report")
     data = json.loads((tmp_path / "report" / "report.json").read_text())
     rows = {r["name"]: r["cells"]["val_seen"] for r in data["experiments"]["tiny_exp"]["table"]["rows"]}
     assert rows["Missing"]["ours"] is None and "not available" in rows["Missing"]["status"]
@@ -382,18 +382,18 @@ def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path
 
     for cid in ("data:data", "train:t-dagger", "train:t-ft", "eval:t-dagger", "eval:t-ft"):
         codes(cid, "ovon 0.1.0 (1111111)")
-    text = build_report(plan, tmp_path / "report").read_text()
+    text = write_experiment_report(plan, tmp_path / "report").read_text()
     assert "Provenance: every finished cell ran with ovon 0.1.0 (1111111) from a clean tree" in text.splitlines()[2]
     assert "†" not in text and entries() == {"DAgger": False, "DAgRL": False, "Missing": False}
     codes("eval:t-ft", "ovon 0.1.0 (2222222+dirty)")
-    text = build_report(plan, tmp_path / "report").read_text()
+    text = write_experiment_report(plan, tmp_path / "report").read_text()
     assert "1 cell(s) ran with another commit than ovon 0.1.0 (1111111)" in text.splitlines()[2]
     assert "| eval:t-ft | done | 2222222 | dirty | recorded | † other commit (2222222); dirty tree |" in text
     assert entries() == {"DAgger": False, "DAgRL": True, "Missing": False}
     assert "# eval:t-ft: done" in text and "(2222222+dirty) †" in text
     codes("eval:t-ft", "ovon 0.1.0 (1111111)")
     codes("train:t-dagger", "ovon 0.1.0 (3333333)", "ovon 0.1.0 (1111111)")  # resumed across commits
-    text = build_report(plan, tmp_path / "report").read_text()
+    text = write_experiment_report(plan, tmp_path / "report").read_text()
     assert "attempts ran with 2 commits (3333333, 1111111)" in text and "| t-dagger† |" in text
     assert entries() == {"DAgger": True, "DAgRL": True, "Missing": False}  # DAgRL starts from DAgger
 
@@ -423,7 +423,7 @@ def test_a_training_cell_killed_after_update_k_continues_to_the_same_weights(tmp
     """Runs that outlast a sitting: SIGKILL the runner's process group (runner and `ovon train` child)
     once the training cell has checkpointed update 3 of 10; the same `ovon experiment run` continues it
     (`ovon train --resume`) to the weights of a run that was never interrupted."""
-    from ovon.experiments.state import last_update
+    from ovon.experiments.outputs import last_update
     from ovon.models.policy import ActorCritic
 
     exp_file = _write(tmp_path / "resume_exp.yaml", RESUME)
@@ -505,7 +505,7 @@ def test_a_training_cell_killed_after_update_k_continues_to_the_same_weights(tmp
 def test_a_finished_training_cell_trains_further_when_its_budget_grows(tmp_path: Path) -> None:
     """A larger budget resumes the finished run (to the weights of a run given that budget from the start);
     its evaluation is refused until redone; a smaller budget is a change, never a cut."""
-    from ovon.experiments.state import last_update
+    from ovon.experiments.outputs import last_update
     from ovon.models.policy import ActorCritic
 
     def plan(root: Path, updates: int, *extra: str):
@@ -521,7 +521,7 @@ def test_a_finished_training_cell_trains_further_when_its_budget_grows(tmp_path:
     statuses = run(longer, dry_run=True, console=quiet()).statuses
     assert (statuses["train:r-ppo"].state, statuses["train:r-ppo"].detail) == (
         "partial",
-        "to extend: --set max_updates=3 -> --set max_updates=5",
+        "to extend: max_updates 3 -> 5",
     )
     assert statuses["eval:r-ppo"].state == "changed" and "train:r-ppo, which it reads" in statuses["eval:r-ppo"].detail
     with pytest.raises(DefinitionError, match="fix: --redo eval:r-ppo recomputes"):
@@ -563,7 +563,8 @@ def test_a_training_cell_may_take_another_recipe_and_init_at_a_scale(tmp_path: P
 
 
 def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:
-    from ovon.experiments.state import cell_lock, cell_status, lock_holder
+    from ovon.experiments.records import cell_lock, lock_holder
+    from ovon.experiments.status import cell_status
 
     plan = resolve([load_experiment("main")], "cpu", tmp_path)
     cell = plan.cells["train:dagger"]
@@ -571,7 +572,7 @@ def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:
     assert lock is not None
     code = (
         "import sys; from pathlib import Path; from ovon.experiments import resolve, load_experiment;"
-        "from ovon.experiments.state import cell_lock;"
+        "from ovon.experiments.records import cell_lock;"
         f"p = resolve([load_experiment('main')], 'cpu', Path({str(tmp_path)!r}));"
         "sys.exit(0 if cell_lock(p, p.cells['train:dagger']) is None else 1)"
     )
@@ -585,8 +586,8 @@ def test_lock_keeps_a_second_process_off_a_running_cell(tmp_path: Path) -> None:
 def test_redo_moves_cells_aside_under_their_locks(tmp_path: Path) -> None:
     """--redo takes each cell's lock before moving anything (another runner could start a half-moved cell),
     and moves nothing when one of them is held."""
+    from ovon.experiments.records import cell_lock, lock_holder
     from ovon.experiments.runner import redo
-    from ovon.experiments.state import cell_lock, lock_holder
 
     plan = resolve([load_experiment("main")], "cpu", tmp_path)
     for cid in ("train:bc", "eval:bc"):

@@ -17,21 +17,15 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from ovon.experiments import DefinitionError, build_report, load_experiment, resolve, run
+from ovon.experiments import DefinitionError, load_experiment, resolve, run, write_experiment_report
+from ovon.experiments.identity import config_unknown, resolved_config
+from ovon.experiments.inputs import inputs
 from ovon.experiments.plan import display
 from ovon.experiments.provenance import parse_code
+from ovon.experiments.records import record_path, write_record
 from ovon.experiments.report import run_command_line
-from ovon.experiments.state import (
-    cell_status,
-    config_unknown,
-    full_commands,
-    identity,
-    inputs,
-    record_path,
-    resolved_config,
-    shell_word,
-    write_record,
-)
+from ovon.experiments.status import cell_status
+from ovon.experiments.tokens import full_commands, shell_word
 
 
 def _plan(root: Path, data: Path, scenes: Path, experiment: str = "noise"):
@@ -56,7 +50,6 @@ def _done(plan, cid: str, **extra) -> None:
         "attempts": 1,
         "rc": 0,
         "wall_s": 60.0,
-        "identity": identity(plan, cell),
         "commands": full_commands(plan, cell),
         "inputs": inputs(plan, cell),
         "code": "ovon 0.1.0 (abc1234)",
@@ -71,7 +64,7 @@ def test_commands_in_reports_name_no_path_of_the_machine_and_paste_into_a_shell(
 ) -> None:
     root = tmp_path / "runs" / "exp"
     plan = _plan(root, tiny_dataset, tiny_scenes)
-    build_report(plan, tmp_path / "report")
+    write_experiment_report(plan, tmp_path / "report")
     text = (tmp_path / "report" / "report.md").read_text()
     data = (tmp_path / "report" / "report.json").read_text()
     for leaked in (str(tmp_path), str(tiny_dataset), str(tiny_scenes)):
@@ -104,22 +97,16 @@ def test_commands_in_reports_name_no_path_of_the_machine_and_paste_into_a_shell(
     assert run_command_line(plan) == "ovon experiment run noise --scale tiny --root $ROOT"
 
 
-def test_records_from_before_tokens_and_configs_stay_done_and_the_runner_says_so_once(
+def test_records_from_before_configs_stay_done_compare_their_run_folder_and_the_runner_says_so_once(
     tmp_path, tiny_dataset, tiny_scenes
 ) -> None:
+    from ovon.config.base import to_dict
+    from ovon.runfolder import IDENTITY_FILE, RunFolder
+
     root = tmp_path / "root"
     plan = _plan(root, tiny_dataset, tiny_scenes)
     cell = plan.cells["train:dagger"]
-    # the old form: only the root a token (shell-quoted), the dataset's absolute path, no resolved config
-    old = [shlex.join(shlex.split(c)) for c in identity(plan, cell, legacy=True)]
-    assert str(tiny_dataset) in old[0] and "'$ROOT/cpu/train/dagger'" in old[0]
-    _done(
-        plan,
-        "train:dagger",
-        identity=old,
-        commands=[shlex.join(shlex.split(c)) for c in full_commands(plan, cell, legacy=True)],
-        config=...,
-    )
+    _done(plan, "train:dagger", config=...)  # the old form: no resolved config recorded
     assert "config" not in json.loads(record_path(plan, cell).read_text())
     assert cell_status(plan, cell, {}).state == "done"
     assert config_unknown(plan, list(plan.cells)) == ["train:dagger"]
@@ -128,20 +115,16 @@ def test_records_from_before_tokens_and_configs_stay_done_and_the_runner_says_so
     text = out.getvalue()
     assert text.count("ran before ovon recorded resolved configs (train:dagger)") == 1
     assert re.search(r"^train:dagger +done \(1.0 min\)$", text, re.M)
-    # an old record whose command differs names the real difference, not the form of its paths
-    _done(
-        plan,
-        "train:dagger",
-        identity=[c.replace("--expert frontier", "--expert shortest-path") for c in old],
-        config=...,
-    )
+    # such a record is compared with its run folder's identity, which names the difference
+    with RunFolder.open(cell.folder, "train", {**to_dict(cell.train_cfg), "expert": "shortest-path"}):
+        pass
     assert cell_status(plan, cell, {}).detail == (
-        "the definition changed since it ran: --expert shortest-path -> --expert frontier"
+        'its resolved config changed since it ran: expert "shortest-path" -> "frontier"'
     )
-    _done(plan, "train:dagger", identity=old, config=...)
-    build_report(plan, tmp_path / "report")
+    (cell.folder / IDENTITY_FILE).unlink()
+    write_experiment_report(plan, tmp_path / "report")
     assert (
-        "| train:dagger | done | abc1234 | clean | not recorded (commands compared) |  |"
+        "| train:dagger | done | abc1234 | clean | not recorded (run folder compared) |  |"
         in (tmp_path / "report" / "report.md").read_text()
     )
 
@@ -220,7 +203,6 @@ def test_a_preset_changed_in_code_makes_a_finished_cell_stale(tmp_path, tiny_dat
         tiny.cells["data:data"],
         {
             "state": "done",
-            "identity": identity(tiny, tiny.cells["data:data"]),
             "config": resolved_config(tiny, tiny.cells["data:data"]),
         },
     )
@@ -231,6 +213,7 @@ def test_a_preset_changed_in_code_makes_a_finished_cell_stale(tmp_path, tiny_dat
         "fast",
         lambda: dataclasses.replace(fast(), starts=dataclasses.replace(fast().starts, max_tries=99)),
     )
+    tiny = resolve([load_experiment("noise")], "tiny", root)  # the cells' configs are resolved with the plan
     st = cell_status(tiny, tiny.cells["data:data"], {})
     assert st.state == "changed" and "starts.max_tries 2000 -> 99" in st.detail
 
@@ -272,28 +255,24 @@ def test_what_reads_a_changed_cell_is_changed_too(tmp_path, tiny_dataset, tiny_s
     )
 
 
-def test_a_cells_command_compares_without_set_order_or_data_workers() -> None:
-    """Reordered `--set` pairs (YAML key order) and a data cell's `--workers` (generation is the same with
-    any number) do not make a finished cell stale; a repeated key's order does (the last one wins)."""
-    from types import SimpleNamespace
+def test_a_cells_identity_is_its_config_not_its_command_words(tmp_path) -> None:
+    """A data cell's `--workers` (generation is the same with any number) leaves it done; another episode
+    count or scene count makes it changed, named by its config key."""
+    plan = resolve([load_experiment("noise")], "tiny", tmp_path)
+    data = plan.cells["data:data"]
+    write_record(plan, data, {"state": "done", "config": resolved_config(plan, data)})
+    (plan.episodes_dir / "train").mkdir(parents=True)
+    (plan.episodes_dir / "train" / "train.json.gz").write_bytes(b"{}")
 
-    from ovon.experiments.state import same_commands
+    def status(*sets: str):
+        now = resolve([load_experiment("noise")], "tiny", tmp_path, list(sets))
+        return cell_status(now, now.cells["data:data"], {})
 
-    def now(text: str):
-        return lambda plan, cell, legacy=False: [text]
-
-    gen = "ovon dataset generate --set b=2 --set a=1 --workers 2 --out $ROOT/x"
-    data, train = SimpleNamespace(kind="data"), SimpleNamespace(kind="train")
-    assert same_commands(["ovon dataset generate --set a=1 --workers 1 --set b=2 --out $ROOT/x"], None, data, now(gen))
-    assert not same_commands(["ovon dataset generate --set a=1 --set b=3 --out $ROOT/x"], None, data, now(gen))
-    assert not same_commands(["ovon train --set a=1 --set a=2"], None, train, now("ovon train --set a=2 --set a=1"))
-    assert same_commands(
-        ["ovon train --set b=1 --agent-arg x=1 --set a=2"],
-        None,
-        train,
-        now("ovon train --set a=2 --set b=1 --agent-arg x=1"),
+    assert status().state == "done" and status("data.workers=3").state == "done"
+    assert status("data.set={episodes_per_val_split: 5}").detail.startswith(
+        "its resolved config changed since it ran: episodes_per_train_scene 8 -> 60"
     )
-    assert not same_commands(["ovon evaluate --workers 1"], None, train, now("ovon evaluate --workers 2"))
+    assert status("data.train_scenes=2").detail.endswith("scene_generation.train_scenes 1 -> 2")
 
 
 def test_another_scene_dataset_at_the_same_path_makes_finished_cells_stale(tmp_path, tiny_dataset, tiny_scenes) -> None:
@@ -315,7 +294,7 @@ def test_another_scene_dataset_at_the_same_path_makes_finished_cells_stale(tmp_p
 def test_an_episode_file_edited_to_the_same_size_makes_finished_cells_stale(tmp_path, tiny_dataset, tiny_scenes):
     """The episodes' content is an input (names and sizes alone missed a same-size edit); the hashes persist
     in the scale folder by size and mtime, so a later status pass reads no file again."""
-    from ovon.experiments import state
+    from ovon.experiments import inputs as state
 
     data = tmp_path / "episodes"
     shutil.copytree(tiny_dataset, data)
@@ -400,7 +379,6 @@ def test_an_interrupted_cell_whose_input_changed_is_changed_not_failed(tmp_path,
             "name": cell.name,
             "state": "failed",
             "rc": "interrupted",
-            "identity": identity(plan, cell),
             "config": resolved_config(plan, cell),
             "inputs": inputs(plan, cell),
         },

@@ -126,14 +126,14 @@ def cmd_run(args) -> int:
 
 def cmd_report(args) -> int:
     from ovon.atomic import check_output_path
-    from ovon.experiments import build_report
+    from ovon.experiments import write_experiment_report
 
     scale = args.scale or _only_scale(_check_root(args.root))
     plan = _plan(args, scale)
     out = check_output_path(
         args.out if args.out is not None else plan.base / "reports" / plan.names, "--out", folder=True
     )
-    path = build_report(plan, out)
+    path = write_experiment_report(plan, out)
     print(f"report: {path}")
     return 0
 

@@ -1,8 +1,9 @@
-"""Resolve experiment definitions at a scale into cells with their exact `ovon` commands.
+"""Resolve experiment definitions at a scale into typed cells (`ovon.experiments.cells`).
 
-Why the exact commands: the runner executes them, `--dry-run` prints them, and validation parses them
-with the real `ovon` argument parser and builds the real `TrainConfig` (`ovon.train.config.build_config`),
-so a definition that resolves here is one the commands accept. Layout under `<root>/<scale>/`:
+Why typed: a cell's config (the GenerationConfig, the TrainConfig built by `ovon.train.config.build_config`,
+the EvalConfig) is its identity; its command is rendered from it. Validation also parses each rendered
+command with the real `ovon` argument parser, so a definition that resolves here is one the commands
+accept. Layout under `<root>/<scale>/`:
 `data/` (generated scenes + episodes), `train/<cell>/`, `eval/<cell>/`, `cells/` (the runner's records),
 `locks/`, `logs/`, `reports/`.
 """
@@ -12,12 +13,13 @@ from __future__ import annotations
 import contextlib
 import io
 import shlex
-from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 from ovon.config.base import ConfigError, merge, parse_overrides
 from ovon.dataset.io import VAL_SPLITS
+from ovon.experiments.cells import Cell, DataRun, EvalRun, Plan, TrainRun, overrides_text
 from ovon.experiments.definitions import (
     Catalogue,
     CellScale,
@@ -33,78 +35,16 @@ from ovon.experiments.definitions import (
     row_eval,
 )
 from ovon.runfolder import flatten  # {"a": {"b": 1}, "c.d": 2} -> {"a.b": 1, "c.d": 2}: the one flattener
+from ovon.train.folder import EpisodeSource
 
 CAMERA_FIELDS = ("width", "height", "hfov_deg", "camera_height", "min_depth", "max_depth")
 PERCEPTION = {"oracle-vl": "oracle perception", "siglip": "SigLIP", "cnn": "CNN trained from pixels"}
-
-
-@dataclass
-class Cell:
-    """One unit of work: the data, a training run or an evaluation, with its `ovon` commands."""
-
-    kind: str  # data | train | eval
-    name: str
-    commands: list[list[str]]  # `ovon` argvs without the program name
-    folder: Path
-    deps: tuple[str, ...] = ()  # ids of the cells it needs
-    launcher: tuple[str, ...] = ()  # torchrun prefix (training at paper scale)
-    train_cfg: Any = None  # the resolved TrainConfig (train cells)
-    eval_cell: EvalCell | None = None
-    total: int | None = None  # updates (train) or episodes (eval) when known, for progress
-    unavailable: str = ""  # eval: why the agent cannot run in this installation
-
-    @property
-    def id(self) -> str:
-        return f"{self.kind}:{self.name}"
-
-
-@dataclass
-class Plan:
-    experiments: list[Experiment]
-    scale: Scale
-    root: Path  # as the user gave it
-    catalogue: Catalogue
-    cells: dict[str, Cell] = field(default_factory=dict)  # id -> cell, dependencies first
-    episodes_dir: Path = Path()
-    scenes_dir: Path = Path()
-
-    @property
-    def base(self) -> Path:
-        return self.root / self.scale.name
-
-    @property
-    def names(self) -> str:
-        return "+".join(e.name for e in self.experiments)
 
 
 def display(cell: Cell, argv: list[str]) -> str:
     """The command as a user types it (`ovon ...`, or `torchrun ... -m ovon.cli.main ...`)."""
     head = [*cell.launcher, "-m", "ovon.cli.main"] if cell.launcher else ["ovon"]
     return shlex.join([*head, *argv])
-
-
-def render_value(v: Any) -> str:
-    """A value as `--set key=VALUE` text that `parse_overrides` (YAML) reads back as the same value."""
-    import json
-
-    import yaml
-
-    if isinstance(v, str):
-        try:
-            same = yaml.safe_load(v) == v
-        except yaml.YAMLError:
-            same = False
-        return v if same and v != "" else json.dumps(v)
-    if isinstance(v, tuple):
-        v = list(v)
-    return json.dumps(v)
-
-
-def set_args(values: dict, flag: str = "--set") -> list[str]:
-    out: list[str] = []
-    for k, v in flatten(values).items():
-        out += [flag, f"{k}={render_value(v)}"]
-    return out
 
 
 # ----- resolution ------------------------------------------------------------------------------------
@@ -221,44 +161,24 @@ def _data_cell(plan: Plan) -> None:
     d, base = plan.scale.data, plan.base
     if d.source == "paths":
         plan.episodes_dir, plan.scenes_dir = Path(d.episodes), Path(d.scenes)
-        plan.cells["data:data"] = Cell("data", "data", [], plan.episodes_dir)
+        plan.cells["data:data"] = Cell("data", "data", plan.episodes_dir)
         return
     scenes, episodes = base / "data" / "scenes", base / "data" / "episodes"
     plan.episodes_dir, plan.scenes_dir = episodes, scenes
-    cmds = [
-        [
-            "scenes",
-            "generate",
-            "--split",
-            split,
-            "--count",
-            str(n),
-            "--seed",
-            str(d.seed),
-            "--out",
-            str(scenes),
-            "--workers",
-            str(d.workers),
-        ]
-        for split, n in (("train", d.train_scenes), ("val", d.val_scenes))
-    ]
-    cmds.append(
-        [
-            "dataset",
-            "generate",
-            "--scenes",
-            str(scenes),
-            "--out",
-            str(episodes),
-            "--preset",
-            d.preset,
-            *set_args(d.set),
-            "--workers",
-            str(d.workers),
-            "--no-progress",
-        ]
-    )
-    plan.cells["data:data"] = Cell("data", "data", cmds, base / "data")
+    overrides = flatten(d.set)
+    config = generation_config(d.preset, overrides, f"scales.yaml:{plan.scale.name}.data")
+    run = DataRun(config, d.preset, overrides, scenes, episodes, d.train_scenes, d.val_scenes, d.seed, d.workers)
+    plan.cells["data:data"] = Cell("data", "data", base / "data", run)
+
+
+def generation_config(preset: str, overrides: dict, where: str) -> Any:
+    """The GenerationConfig `ovon dataset generate --preset PRESET --set ...` builds."""
+    from ovon.config.dataset import generation_config as build
+
+    try:
+        return build(SimpleNamespace(preset=preset, config=None, set=overrides_text(overrides)))
+    except (ConfigError, KeyError, ValueError, TypeError) as e:
+        raise DefinitionError(f"{where}: {e.args[0] if isinstance(e, KeyError) and e.args else e}") from None
 
 
 def _per_scale(cell: TrainCell | EvalCell, scale: str) -> CellScale:
@@ -283,27 +203,41 @@ def _train_cell(plan: Plan, name: str) -> None:
     if init is not None and recipe.algo != "ppo":
         raise DefinitionError(f"{where}: init works with a ppo recipe (BC->RL, DAgger->RL), not {recipe.algo!r}")
     folder = plan.base / "train" / name
-    argv = ["train", "--algo", recipe.algo, "--preset", rs.preset]
-    if tc.expert:
-        argv += ["--expert", tc.expert]
-    if tc.policy and init is None:
-        argv += ["--policy", tc.policy]
-    if init is not None:
-        argv += ["--init", str(init.folder / "policy.pt")]
-    argv += ["--data", str(plan.episodes_dir), "--scenes", str(plan.scenes_dir)]
-    values = {
+    overrides = {
         **flatten(rs.set),
         **flatten(tc.set),
         **flatten(_per_scale(tc, sc.name).set),
         "text_cache": str(plan.base / "data" / "text_cache.pt"),
     }
-    argv += set_args(values)
-    argv += ["--out", str(folder)]
+    options = SimpleNamespace(
+        algo=recipe.algo,
+        preset=rs.preset,
+        expert=tc.expert or None,
+        policy=(tc.policy if init is None else "") or None,
+        encoder=None,
+        config=None,
+        task=None,
+        set=overrides_text(overrides),
+    )
+    source = EpisodeSource(data=str(plan.episodes_dir), scenes=str(plan.scenes_dir))
     launcher: tuple[str, ...] = ()
     if sc.train.nproc_per_node > 0:
         launcher = ("torchrun", *sc.train.torchrun_args, "--nproc-per-node", str(sc.train.nproc_per_node))
-    cell = Cell("train", name, [argv], folder, ("data:data",) + ((init.id,) if init else ()), launcher)
-    cell.train_cfg = build_train_config(argv, where)
+    init_path = str(init.folder / "policy.pt") if init is not None else ""
+    run = TrainRun(
+        build_train_config(options, where),
+        source,
+        recipe.algo,
+        rs.preset,
+        tc.expert,
+        options.policy or "",
+        init_path,
+        overrides,
+        folder,
+        world_size(sc),
+    )
+    cell = Cell("train", name, folder, run, ("data:data",) + ((init.id,) if init else ()), launcher)
+    check_command(cell, where)
     if init is not None:
         if tc.policy and tc.policy != init.train_cfg.policy.core:
             raise DefinitionError(
@@ -359,13 +293,17 @@ def parse_cli(argv: list[str], where: str):
         ) from None
 
 
-def build_train_config(argv: list[str], where: str):
-    """The `TrainConfig` that `ovon train` builds from `argv` (presets, --set and their validation)."""
+def check_command(cell: Cell, where: str) -> Any:
+    """The cell's (last) command parsed by the real `ovon` parser: the command accepts what the cell is."""
+    return parse_cli(cell.commands[-1], where)
+
+
+def build_train_config(options: Any, where: str) -> Any:
+    """The `TrainConfig` that `ovon train` builds from the same options (presets, --set and their validation)."""
     from ovon.train.config import build_config
 
-    args = parse_cli(argv, where)
     try:
-        return build_config(args)
+        return build_config(options)
     except (ConfigError, KeyError, ValueError, TypeError) as e:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else e
         raise DefinitionError(f"{where}: {msg}") from None
@@ -384,36 +322,33 @@ def _eval_cell(plan: Plan, name: str) -> None:
         )
     per = _per_scale(ec, sc.name)
     folder = plan.base / "eval" / name
-    argv = ["evaluate", "--agent", ec.agent]
     deps = ["data:data"]
+    checkpoint = ""
     if ec.checkpoint:
         ckpt = plan.cells[f"train:{ec.checkpoint}"]
-        argv += ["--checkpoint", str(ckpt.folder / "policy.pt")]
+        checkpoint = str(ckpt.folder / "policy.pt")
         deps.append(ckpt.id)
-    agent_args = {**ec.agent_args, **per.agent_args}
-    argv += set_args(agent_args, "--agent-arg")
     ev = sc.evaluate
-    argv += [
-        "--data",
-        str(plan.episodes_dir),
-        "--scenes",
-        str(plan.scenes_dir),
-        "--splits",
-        ",".join(ec.splits),
-        "--seeds",
-        ",".join(str(s) for s in ev.seeds),
-    ]
-    if ev.episodes is not None:
-        argv += ["--episodes", str(ev.episodes)]
-    if ec.noise:
-        argv += ["--noise", ec.noise]
     values = {**flatten(ev.set), **flatten(ec.set), **flatten(per.set)}
     if ec.camera:
         values = {**camera_set(plan.cells[f"train:{ec.camera}"].train_cfg), **values}
-    argv += set_args(values)
-    argv += ["--workers", str(ev.workers), "--executor", ev.executor, "--out", str(folder), "--no-progress"]
-    cell = Cell("eval", name, [argv], folder, tuple(deps), eval_cell=ec)
-    _check_eval_args(argv, where)
+    run = EvalRun(
+        ec.agent,
+        checkpoint,
+        {**ec.agent_args, **per.agent_args},
+        plan.episodes_dir,
+        plan.scenes_dir,
+        tuple(ec.splits),
+        tuple(ev.seeds),
+        ev.episodes,
+        ec.noise,
+        values,
+        ev.workers,
+        ev.executor,
+        folder,
+    )
+    cell = Cell("eval", name, folder, run, tuple(deps), eval_cell=ec)
+    _check_eval_args(check_command(cell, where), where)
     cell.unavailable = agent_unavailable(ec.agent)
     cell.total = ev.episodes * len(ec.splits) * len(ev.seeds) if ev.episodes is not None else None
     plan.cells[cell.id] = cell
@@ -422,17 +357,16 @@ def _eval_cell(plan: Plan, name: str) -> None:
 def camera_set(train_cfg: Any) -> dict[str, Any]:
     """`--set sim.camera.*` giving an evaluation the camera a training cell saw (where it differs from the
     evaluation default), so agents compared in one table see the same images."""
-    from ovon.evaluate.harness import EvalConfig
+    from ovon.evaluate.config import EvalConfig
 
     default = EvalConfig().sim.camera
     cam = train_cfg.sim.camera
     return {f"sim.camera.{k}": getattr(cam, k) for k in CAMERA_FIELDS if getattr(cam, k) != getattr(default, k)}
 
 
-def _check_eval_args(argv: list[str], where: str) -> None:
-    from ovon.evaluate.harness import EvalConfig, apply_overrides, parse_noise
+def _check_eval_args(args: Any, where: str) -> None:
+    from ovon.evaluate.config import EvalConfig, apply_overrides, parse_noise
 
-    args = parse_cli(argv, where)
     try:
         parse_noise(args.noise)
         apply_overrides(EvalConfig(), args.set)

@@ -15,8 +15,9 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from ovon.experiments.plan import Plan
-from ovon.experiments.state import Status, read_record
+from ovon.experiments.cells import Plan
+from ovon.experiments.records import read_record
+from ovon.experiments.status import Status
 
 MARK = "†"
 _CODE = re.compile(r"^(?P<version>.*?)(?: \((?P<commit>[0-9a-f]{4,40})(?P<dirty>\+dirty)?\))?$")
@@ -78,7 +79,7 @@ def cell_provenance(plan: Plan, statuses: dict[str, Status], report_code: str) -
     that ran (the user's own dataset has no record and no code)."""
     cells: dict[str, dict] = {}
     for cid, cell in plan.cells.items():
-        rec = read_record(plan, cell) if cell.commands else None
+        rec = read_record(plan, cell) if cell.run is not None else None
         if not rec or rec.get("state") == "unreadable":
             continue
         codes = [parse_code(c) for c in attempt_codes(rec)]
@@ -151,7 +152,7 @@ def provenance_markdown(prov: dict) -> list[str]:
     for cid, c in prov["cells"].items():
         commits = ", ".join(c["commits"]) or "not recorded"
         tree = "dirty" if c["dirty"] else ("clean" if "?" not in c["commits"] and c["commits"] else "unknown")
-        config = "recorded" if c["config_recorded"] else "not recorded (commands compared)"
+        config = "recorded" if c["config_recorded"] else "not recorded (run folder compared)"
         mark = f"{MARK} {c['why']}" if c["marked"] else ""
         lines.append(f"| {cid} | {c['status']} | {commits} | {tree} | {config} | {mark} |")
     return lines

@@ -1,6 +1,6 @@
 """The experiment report: the paper's number beside ours in every cell, the findings, the figures.
 
-`build_report(plan, out)` writes `report.md`, `report.json` and PNG figures under `out/`. Ours are
+`write_experiment_report(plan, out)` writes `report.md`, `report.json` and PNG figures under `out/`. Ours are
 means ± std over evaluation seeds of finished evaluation cells only; a cell that did not finish shows
 as "not run" with the reason (never as a zero). Row setups name the perception or detection each agent
 used ("oracle perception", "oracle detection"), taken from the cells' resolved configs. The first line
@@ -11,15 +11,16 @@ for a dataset outside it, `$EPISODES` / `$SCENES`.
 
 from __future__ import annotations
 
-import shlex
 from pathlib import Path
 from typing import Any
 
 from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
+from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, paper_numbers, parse_ref, row_eval
 from ovon.experiments.findings import RULE_NOTE, judge
-from ovon.experiments.plan import PERCEPTION, Cell, Plan, render_value
+from ovon.experiments.outputs import last_update
+from ovon.experiments.plan import PERCEPTION
 from ovon.experiments.provenance import (
     MARK,
     cell_provenance,
@@ -28,15 +29,14 @@ from ovon.experiments.provenance import (
     marked_chain,
     provenance_markdown,
 )
-from ovon.experiments.state import (
+from ovon.experiments.records import read_record
+from ovon.experiments.status import Status, plan_status
+from ovon.experiments.tokens import (
     EPISODES_TOKEN,
     ROOT_TOKEN,
     SCENES_TOKEN,
-    Status,
     full_commands,
-    plan_status,
     portable_text,
-    read_record,
     shell_word,
 )
 from ovon.runfolder import flatten
@@ -44,12 +44,9 @@ from ovon.runfolder import flatten
 
 # ----- what the cells hold ---------------------------------------------------------------------------
 def _done_seeds(record: dict | None) -> set[int] | None:
-    """The seeds of the command that last finished the cell (None: any)."""
-    for cmd in (record or {}).get("commands") or []:
-        toks = shlex.split(cmd)
-        if "--seeds" in toks:
-            return {int(s) for s in toks[toks.index("--seeds") + 1].split(",") if s}
-    return None
+    """The seeds of the config that last finished the cell (None: any)."""
+    seeds = ((record or {}).get("config") or {}).get("seeds")
+    return {int(s) for s in seeds} if isinstance(seeds, list) else None
 
 
 def eval_records(plan: Plan, cell: Cell) -> list[dict]:
@@ -101,15 +98,9 @@ def _describe_agent(agent: str, cells: dict, cell: Cell) -> str:
 
 
 def _agent_args(cell: Cell) -> dict[str, Any]:
-    import yaml
-
-    argv = cell.commands[0]
-    out = {}
-    for i, a in enumerate(argv):
-        if a == "--agent-arg" and i + 1 < len(argv):
-            k, _, v = argv[i + 1].partition("=")
-            out[k] = yaml.safe_load(v)
-    return out
+    """The cell's `--agent-arg` values (flattened keys, as its command passes them)."""
+    assert isinstance(cell.run, EvalRun)
+    return dict(flatten(cell.run.agent_args))
 
 
 # ----- collection ------------------------------------------------------------------------------------
@@ -270,8 +261,6 @@ def path_legend(plan: Plan) -> dict[str, str]:
 
 
 def _cells_info(plan: Plan, statuses: dict[str, Status], prov: dict) -> dict:
-    from ovon.experiments.state import last_update
-
     out = {}
     for cid, cell in plan.cells.items():
         rec = read_record(plan, cell) or {}
@@ -442,7 +431,7 @@ def _failure_table(fig: dict) -> list[str]:
 
 
 # ----- entry point -----------------------------------------------------------------------------------
-def build_report(plan: Plan, out: str | Path) -> Path:
+def write_experiment_report(plan: Plan, out: str | Path) -> Path:
     """Write `report.md`, `report.json` and the figures for the plan's experiments into `out`."""
     from ovon.experiments.figures import failure_figure, table_figure, training_curve
 
@@ -469,4 +458,4 @@ def build_report(plan: Plan, out: str | Path) -> Path:
     return out / "report.md"
 
 
-__all__ = ["build_report", "collect"]
+__all__ = ["collect", "write_experiment_report"]

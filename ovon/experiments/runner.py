@@ -19,27 +19,17 @@ from pathlib import Path
 
 from rich.console import Console
 
+from ovon.experiments.cells import Cell, Plan
 from ovon.experiments.definitions import DefinitionError
-from ovon.experiments.plan import Cell, Plan, display
+from ovon.experiments.identity import config_unknown, resolved_config
+from ovon.experiments.inputs import inputs
+from ovon.experiments.outputs import count_lines, finished_outputs, last_update
+from ovon.experiments.plan import display
 from ovon.experiments.provenance import code_version
+from ovon.experiments.records import cell_lock, lock_holder, log_path, read_record, record_path, write_record
 from ovon.experiments.select import match_cells, select
-from ovon.experiments.state import (
-    Status,
-    cell_lock,
-    config_unknown,
-    count_lines,
-    full_commands,
-    identity,
-    inputs,
-    last_update,
-    lock_holder,
-    log_path,
-    plan_status,
-    read_record,
-    record_path,
-    resolved_config,
-    write_record,
-)
+from ovon.experiments.status import Status, plan_status
+from ovon.experiments.tokens import full_commands
 
 POLL_S = 2.0
 
@@ -176,7 +166,6 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
         {
             "kind": cell.kind,
             "name": cell.name,
-            "identity": identity(plan, cell),
             "state": "running",
             "attempts": int(rec.get("attempts", 0)) + 1,
             "started": time.strftime("%Y-%m-%d %H:%M:%S"),
@@ -215,8 +204,6 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
         if task is not None:
             progress.remove_task(task)
     if rc == 0:
-        from ovon.experiments.state import finished_outputs
-
         if finished_outputs(plan, cell):
             rec.update({"state": "done", "rc": 0, "commands": full_commands(plan, cell), "inputs": inputs(plan, cell)})
         else:
@@ -368,7 +355,7 @@ def run(
         say(
             console,
             f"note: {len(unknown)} finished cell(s) ran before ovon recorded resolved configs "
-            f"({', '.join(unknown)}): only their commands are compared; --redo them to record it",
+            f"({', '.join(unknown)}): only their run folder's identity is compared; --redo them to record it",
         )
     if dry_run:
         head = f"{plan.names} at scale {plan.scale.name}, root {plan.root}: {len(ids)} of {len(plan.cells)} cells"
@@ -382,9 +369,9 @@ def run(
     (plan.base / "data").mkdir(parents=True, exist_ok=True)  # the shared goal-text cache lives there
     result = _loop(plan, ids, wait, console)
     if write_report:
-        from ovon.experiments.report import build_report
+        from ovon.experiments.report import write_experiment_report
 
-        result.report = build_report(plan, plan.base / "reports" / plan.names)
+        result.report = write_experiment_report(plan, plan.base / "reports" / plan.names)
         say(console, f"report: {result.report}")
     return result
 
