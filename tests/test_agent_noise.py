@@ -186,7 +186,7 @@ def test_unknown_odometry_mode_is_a_clear_error():
 
 def test_noise_option_picks_the_odometry_mode():
     from ovon.config.base import ConfigError
-    from ovon.evaluate.harness import parse_noise
+    from ovon.evaluate.config import parse_noise
 
     assert parse_noise("odometry").odometry_mode == "bounded"
     assert parse_noise("actuation,odometry:drift").odometry_mode == "drift"

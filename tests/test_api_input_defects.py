@@ -21,7 +21,7 @@ from ovon_agent import Client, RemoteError
 
 from ovon.agents.remote import RemoteAgent, RemoteConfig, check_remote, parse_address
 from ovon.config.base import ConfigError, from_dict, validate
-from ovon.evaluate.harness import EvalConfig
+from ovon.evaluate.config import EvalConfig
 from tests.cli_errors import one_line, run
 from tests.remote_agents import serving
 
@@ -425,7 +425,7 @@ def test_a_served_name_that_would_break_the_table_is_refused(name: str) -> None:
 
 def test_a_served_name_is_the_row_name_when_it_fits() -> None:
     with serving(_Still, name="my agent (v2)") as server:
-        assert check_remote(f"remote:127.0.0.1:{server.port}", RemoteConfig(timeout_s=5)) == "my agent (v2)"
+        assert check_remote(f"remote:127.0.0.1:{server.port}", RemoteConfig(timeout_s=5)).name == "my agent (v2)"
 
 
 def test_dataclass_replace_keeps_str_paths(tmp_path: Path) -> None:

@@ -357,7 +357,7 @@ def test_video_from_another_folder_finds_the_runs_relative_inputs(
 def test_noise_twice_stop_probability_and_negative_house_seed_are_refused():
     from ovon.agents.random_agent import RandomAgent
     from ovon.config.base import ConfigError
-    from ovon.evaluate.harness import parse_noise
+    from ovon.evaluate.config import parse_noise
     from ovon.sim.world import load_scene_any
 
     with pytest.raises(ConfigError, match="actuation noise given twice"):

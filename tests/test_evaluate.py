@@ -14,7 +14,9 @@ from pathlib import Path
 import pytest
 
 from ovon.cli.main import main as ovon
-from ovon.evaluate.harness import EvalConfig, evaluate, load_specs, parse_noise
+from ovon.dataset.episodes import load_specs
+from ovon.evaluate.config import EvalConfig, parse_noise
+from ovon.evaluate.harness import evaluate
 from ovon.evaluate.results import read_records, record_key
 
 FIXTURES = Path(__file__).parent / "fixtures"

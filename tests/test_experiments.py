@@ -83,10 +83,12 @@ def test_every_definition_resolves_at_every_scale(scale: str, tmp_path: Path) ->
     else:
         assert trains["dagger"].launcher == ()
         assert trains["dagger"].train_cfg.encoder.image == "oracle-vl"
-    # VLFM sees the camera the policies were trained with
-    vlfm = evals["vlfm"].commands[0]
-    cam = trains["dagrl"].train_cfg.sim.camera
-    assert f"sim.camera.height={cam.height}" in vlfm
+    # VLFM sees the camera the policies were trained with (an override, or the default when they match it)
+    from ovon.config.sim import cpu_sim_config
+
+    sets, cam, default = evals["vlfm"].run.overrides, trains["dagrl"].train_cfg.sim.camera, cpu_sim_config().camera
+    for key in ("width", "height", "hfov_deg"):
+        assert sets.get(f"sim.camera.{key}", getattr(default, key)) == getattr(cam, key), key
 
 
 def test_cells_shared_between_experiments_are_one_run_folder(tmp_path: Path) -> None:

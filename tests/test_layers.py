@@ -32,18 +32,6 @@ EXCEPTIONS = {
         "ovon.experiments.runner",
         "ovon.cli.main",
     ): "the runner executes cells as `python -m ovon.cli.main ...` child processes (not an import)",
-    (
-        "ovon.experiments.state",
-        "ovon.cli.dataset",
-    ): "a data cell's resolved GenerationConfig is what its command line resolves to in `ovon dataset generate`",
-    (
-        "ovon.experiments.state",
-        "ovon.cli.evaluate",
-    ): "an evaluation cell's resolved EvalConfig is what its command line resolves to in `ovon evaluate`",
-    (
-        "ovon.train.folder",
-        "ovon.evaluate.harness",
-    ): "`EpisodeSource.load` reads a dataset split with `load_specs`, the one reader of a split's episodes",
 }
 
 _MODULE_STRING = re.compile(r"^ovon(?:\.\w+)+(?::[\w.]+)?$")

@@ -293,14 +293,14 @@ def test_config_presets_overrides_and_errors():
     assert VLFMAgent.describe(detector="noisy") == "VLFM, oracle detection (miss 0.3, fp 0.3), oracle-vl value"
     # the command line passes dotted keys through (--agent-arg navigator.stop_distance_m=0.6)
     from ovon.agents import check_agent
-    from ovon.cli.evaluate import _agent_kwargs
+    from ovon.evaluate.config import parse_agent_args
 
-    kwargs = _agent_kwargs(["navigator.stop_distance_m=0.6", "preset=cpu"], None)
+    kwargs = parse_agent_args(["navigator.stop_distance_m=0.6", "preset=cpu"], None)
     assert kwargs == {"navigator.stop_distance_m": 0.6, "preset": "cpu"}
     check_agent("vlfm", kwargs)
     assert VLFMAgent(**kwargs).cfg.navigator.stop_distance_m == 0.6
     with pytest.raises(ConfigError, match="stop_distance_m"):  # the config's own line, not wrapped
-        check_agent("vlfm", _agent_kwargs(["navigator.stop_distanc=0.6"], None))
+        check_agent("vlfm", parse_agent_args(["navigator.stop_distanc=0.6"], None))
 
 
 def test_cli_evaluate_vlfm_and_report_row_names(tiny_dataset, tiny_scenes, tmp_path, capsys):

@@ -264,8 +264,8 @@ def test_pointnav_is_a_task_of_the_one_harness(tmp_path: Path) -> None:
     before any work."""
     from ovon.cli.main import main
     from ovon.config.base import ConfigError
-    from ovon.evaluate.harness import EvalConfig, evaluate, pointnav_config
-    from ovon.evaluate.pointnav import checkpoint_task
+    from ovon.evaluate.config import EvalConfig, checkpoint_task, pointnav_config
+    from ovon.evaluate.harness import evaluate
 
     task = dataclasses.replace(checkpoint_task(None), max_steps=20)
     cfg = pointnav_config(agent="random", procedural="80001", episodes=2, workers=1, task=task)
@@ -532,7 +532,7 @@ def test_learned_navigator_samples_with_the_episodes_seed(tiny_policy: Path) -> 
 
 def test_checkpoint_task_evaluates_with_every_stop_ending_the_episode(tmp_path: Path, tiny_policy: Path) -> None:
     """A policy trained with task.failed_stop_ends=false is evaluated under the task's rule, not refused."""
-    from ovon.evaluate.pointnav import checkpoint_task
+    from ovon.evaluate.config import checkpoint_task
 
     saved = torch.load(tiny_policy, map_location="cpu", weights_only=True)
     saved["extra"]["task"]["failed_stop_ends"] = False

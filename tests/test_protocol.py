@@ -34,3 +34,32 @@ def test_results_do_not_depend_on_where_the_data_lives(tiny_dataset, tiny_scenes
     recs = read_records(tmp_path / "a")
     assert recs and all(not Path(r["scene"]).is_absolute() for r in recs)
     assert len({tuple(r["actions"]) for r in recs}) > 1  # the random agent really drew different actions
+
+
+def _config(**camera) -> dict:
+    from dataclasses import asdict
+
+    from ovon.config.sim import CameraConfig, SimConfig
+    from ovon.config.task import TaskConfig
+
+    return {"sim": asdict(SimConfig(camera=CameraConfig(**camera))), "task": asdict(TaskConfig())}
+
+
+def test_the_authors_settings_are_named_and_anything_else_is_custom_with_its_differences():
+    from ovon.evaluate.protocol import protocol_card
+
+    episodes = {"set": "whole splits", "splits": {"val_seen": 3}, "seeds": [0], "ids_sha256": "ab"}
+    agent = {"privileged": False, "oracle_perception": False, "description": "random"}
+    paper = protocol_card(_config(), episodes, agent)
+    assert paper["name"] == "hm3d-ovon" and paper["differs_from"] == {}
+    assert paper["task"]["success_distance"] == 0.25 and paper["task"]["max_steps"] == 500
+    cpu = protocol_card(_config(width=72, height=128), episodes, agent)
+    assert cpu["name"] == "custom"
+    assert cpu["differs_from"]["hm3d-ovon"] == [
+        "camera.width 72 (hm3d-ovon: 360)",
+        "camera.height 128 (hm3d-ovon: 640)",
+    ]
+    assert cpu["fingerprint"] != paper["fingerprint"]
+    assert protocol_card(_config(), episodes, agent)["fingerprint"] == paper["fingerprint"]
+    oracle = protocol_card(_config(), episodes, {**agent, "oracle_perception": True})
+    assert oracle["name"] == "hm3d-ovon" and oracle["fingerprint"] != paper["fingerprint"]

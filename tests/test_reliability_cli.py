@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from ovon.evaluate.harness import load_specs
+from ovon.dataset.episodes import load_specs
 from tests.cli_errors import one_line, refused, run
 
 DEEP = "[" * 600 + "]" * 600

@@ -14,7 +14,7 @@ from ovon.config.dataset import GENERATION_PRESETS, GenerationConfig
 from ovon.config.sim import CameraConfig, SimConfig
 from ovon.config.task import TaskConfig
 from ovon.dataset.splits import SplitConfig
-from ovon.evaluate.harness import EvalConfig
+from ovon.evaluate.config import EvalConfig
 from ovon.models.config import ENCODER_PRESETS, POLICY_PRESETS, EncoderConfig, PolicyConfig
 from ovon.train.config import TrainConfig
 

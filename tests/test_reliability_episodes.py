@@ -15,10 +15,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ovon.cli.main import main as ovon
+from ovon.dataset.episodes import load_specs
 from ovon.dataset.io import EpisodeDataset, parse_shard, read_shard
 from ovon.dataset.records import DatasetError, confined_scene_id
 from ovon.dataset.validate import DatasetWarning, check_shard, validate_dataset
-from ovon.evaluate.harness import EvalConfig, evaluate, load_specs, prepare
+from ovon.evaluate.config import EvalConfig
+from ovon.evaluate.harness import evaluate, prepare
 
 
 def _shards(root: Path, split: str = "val_seen") -> list[Path]:

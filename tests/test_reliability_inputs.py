@@ -408,7 +408,7 @@ def test_sim_view_out_naming_a_folder_called_png_is_refused(tmp_path, capsys):
 
 
 def test_load_split_strict_raises_dataset_error(data, tiny_scenes):
-    from ovon.evaluate.harness import load_split
+    from ovon.dataset.episodes import load_split
 
     _mutate(data, _bad_geodesic)
     assert load_split(str(data), str(tiny_scenes), "val_seen", None).skipped == {"info_number": 1}

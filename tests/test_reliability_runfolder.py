@@ -15,7 +15,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ovon.evaluate.harness import EvalConfig, evaluate
+from ovon.evaluate.config import EvalConfig
+from ovon.evaluate.harness import evaluate
 from ovon.evaluate.results import REJECTED_FILE, read_records, record_key
 from ovon.runfolder import IDENTITY_FILE, LOCK_FILE, RunFolder, RunFolderError
 

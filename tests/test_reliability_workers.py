@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from ovon.evaluate.harness import EvalConfig, evaluate
+from ovon.evaluate.config import EvalConfig
+from ovon.evaluate.harness import evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
 OUTPUTS = ("episodes.jsonl", "summary.json", "table.md", "run_identity.json")

@@ -21,10 +21,12 @@ import pytest
 from ovon_agent import RemoteError
 
 from ovon.agents.remote import RemoteConfig
-from ovon.agents.served import servable_factory
+from ovon.agents.served import servable_factory, served_config
 from ovon.cli.main import main as ovon
-from ovon.evaluate.harness import EvalConfig, evaluate
+from ovon.evaluate.config import EvalConfig
+from ovon.evaluate.harness import evaluate
 from ovon.evaluate.results import read_records
+from ovon.runfolder import RunFolderError
 from tests.remote_agents import BatchedRandom, free_ports, serving
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -43,42 +45,34 @@ def same_files(a: Path, b: Path) -> None:
 
 
 @contextmanager
-def serve_process(*args: str, port: int = 0, env: dict | None = None, retry_s: float = 30.0):
-    """`ovon serve ARGS --port PORT` in its own process (the repository root as working directory), killed on
-    exit; yields the port it listens on, read from the line it prints. Port 0 (the default): the server binds
-    a free port itself, so no other process can take it between the pick and the bind. A given port (a re-run
-    that must find the server at the address in the run's identity) that is in use is tried again for
-    `retry_s`: what holds it may be passing (another test probing for a free port)."""
-    cmd = [sys.executable, "-m", "ovon.cli.main", "serve", *args, "--port", str(port)]
-    deadline = time.monotonic() + retry_s
-    while True:
-        with tempfile.TemporaryFile("w+") as err:  # a file, not a pipe: the server's log never blocks it
-            proc = subprocess.Popen(
-                cmd,
-                cwd=ROOT,
-                stdout=subprocess.PIPE,
-                stderr=err,
-                text=True,
-                env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})},
-                start_new_session=True,
-            )
-            try:
-                line = proc.stdout.readline()
-                bound = re.search(r"remote:127\.0\.0\.1:(\d+)", line)
-                if bound:
-                    yield int(bound.group(1))
-                    return
+def serve_process(*args: str, env: dict | None = None):
+    """`ovon serve ARGS --port 0` in its own process (the repository root as working directory), killed on
+    exit; yields the port it listens on, read from the line it prints (the server binds a free port itself,
+    so no other process can take it between the pick and the bind)."""
+    cmd = [sys.executable, "-m", "ovon.cli.main", "serve", *args, "--port", "0"]
+    with tempfile.TemporaryFile("w+") as err:  # a file, not a pipe: the server's log never blocks it
+        proc = subprocess.Popen(
+            cmd,
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=err,
+            text=True,
+            env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})},
+            start_new_session=True,
+        )
+        try:
+            line = proc.stdout.readline()
+            bound = re.search(r"remote:127\.0\.0\.1:(\d+)", line)
+            if not bound:
                 proc.wait()
                 err.seek(0)
-                why = err.read()
-                if not (port and "Address already in use" in why and time.monotonic() < deadline):
-                    raise AssertionError(f"`ovon serve` did not start: {line!r}\n{why[-3000:]}")
-            finally:
-                if proc.poll() is None:
-                    os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-                proc.stdout.close()
-        time.sleep(0.5)
+                raise AssertionError(f"`ovon serve` did not start: {line!r}\n{err.read()[-3000:]}")
+            yield int(bound.group(1))
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            proc.stdout.close()
 
 
 def test_served_random_agent_gives_byte_identical_files(tiny_dataset, tiny_scenes, tmp_path):
@@ -150,9 +144,30 @@ def test_a_server_that_dies_is_one_line_and_the_rerun_resumes(tiny_dataset, tiny
     assert f"tcp://127.0.0.1:{port} closed the connection" in msg and "step 1 of episode val_" in msg
     assert "re-run the same command to resume" in msg and "\n" not in msg
     assert len(read_records(out)) == 2  # the episodes finished before the crash are kept
-    with serve_process(*serve, port=port):  # the same address: the run's identity holds it
-        evaluate(remote, out, progress=False)
+    with serve_process(*serve) as again:  # any address: the run's identity is what the agent says it is
+        evaluate(dataclasses.replace(cfg, agent=f"remote:127.0.0.1:{again}"), out, progress=False)
     same_files(tmp_path / "local", out)
+
+
+def test_a_served_agent_continues_its_run_folder_from_another_address(tiny_dataset, tiny_scenes, tmp_path):
+    """A run folder of a served agent is identified by what the agent says it is (its handshake name and
+    config), not by where it is served: the same agent on another port extends the run; the same name with
+    other arguments, or the agent in-process, is refused."""
+    evaluate(cfg_for(tiny_dataset, tiny_scenes, "random"), tmp_path / "local", progress=False)
+    out = tmp_path / "remote"
+    same = {"name": "random", "config": served_config("random")}
+    with serving(servable_factory("random"), **same) as first, serving(servable_factory("random"), **same) as second:
+        assert first.port != second.port
+        evaluate(cfg_for(tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{first.port}", episodes=2), out, progress=False)
+        evaluate(cfg_for(tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{second.port}"), out, progress=False)
+    same_files(tmp_path / "local", out)
+    kwargs = {"stop_probability": 0.5}
+    other = {"name": "random", "config": served_config("random", kwargs)}
+    with serving(servable_factory("random", kwargs), **other) as third:
+        with pytest.raises(RunFolderError, match=r"settings differ: served_agent\.config_keys .*stop_probability"):
+            evaluate(cfg_for(tiny_dataset, tiny_scenes, f"remote:127.0.0.1:{third.port}"), out, progress=False)
+    with pytest.raises(RunFolderError, match='settings differ: agent "remote" -> "random"'):
+        evaluate(cfg_for(tiny_dataset, tiny_scenes, "random"), out, progress=False)
 
 
 def test_a_hung_agent_times_out_with_the_episode_named(tiny_dataset, tiny_scenes, tmp_path):
@@ -258,3 +273,14 @@ def test_make_agent_gives_a_connected_client():
             assert [remote.act(obs) for _ in range(30)] == [local.act(obs) for _ in range(30)]
         finally:
             remote.close()
+
+
+def test_a_handshake_config_that_is_not_plain_values_is_one_line():
+    from ovon.agents.remote import check_remote
+    from ovon.config.base import ConfigError
+
+    with serving(servable_factory("random"), name="random", config={"weights": b"\x00"}) as server:
+        with pytest.raises(ConfigError, match=r"answered the handshake with config .*expected a map of JSON values"):
+            check_remote(f"remote:127.0.0.1:{server.port}", RemoteConfig(timeout_s=5))
+    with pytest.raises(TypeError, match="config must be a dict"):
+        serving(servable_factory("random"), config=["x"]).__enter__()

@@ -108,6 +108,7 @@ def test_handshake_reset_act_and_what_the_agent_receives():
         try:
             assert client.hello["agent"] == "counter" and client.hello["protocol"] == ovon_agent.PROTOCOL
             assert client.hello["privileged"] is False and client.hello["batch"] is False
+            assert client.hello["config"] == {}
             o = obs()
             assert client.act([{"stream": 0, "obs": o, "info": {"seed": 5, "goal": "chair"}}]) == [1]
             client.reset([{"stream": 0, "info": {"seed": 6}}])
@@ -116,9 +117,10 @@ def test_handshake_reset_act_and_what_the_agent_receives():
         finally:
             client.close()
         assert server.first is None  # the instance built at start-up went to the first stream
-    with serving(agent) as server:
+    with serving(agent, config={"agent": "counter", "agent_kwargs": {"step": 1}}) as server:
         client = Client("127.0.0.1", server.port, timeout_s=5)
         assert client.hello["observations"] == ["depth", "goal"]
+        assert client.hello["config"] == {"agent": "counter", "agent_kwargs": {"step": 1}}  # what it is, for identities
         o = obs()
         client.act([{"stream": 0, "obs": o, "info": {"seed": 5}}])
         client.close()

@@ -12,6 +12,7 @@ never from the command line or the run folder.
 from __future__ import annotations
 
 import ipaddress
+import json
 import multiprocessing.util
 import os
 import re
@@ -170,6 +171,22 @@ class RemoteAgent:
                 "of the same version as this ovon"
             )
         self.privileged = bool(privileged)
+        # What the agent says it is beside its name (`ovon serve`: the agent and its arguments): with the
+        # name, the identity of the run folders it writes, so the same agent served elsewhere continues them.
+        config = hello.get("config")
+        try:
+            self.agent_config = json.loads(
+                json.dumps({} if config is None else config, sort_keys=True, allow_nan=False)
+            )
+        except (TypeError, ValueError, RecursionError):
+            self.agent_config = None
+        if not isinstance(self.agent_config, dict):
+            self.close()
+            raise ConfigError(
+                f"--agent {self.spec}: the agent {_short(self.name)} answered the handshake with config "
+                f"{_short(config)}; expected a map of JSON values (strings, numbers, lists, maps); fix: serve it "
+                "with ovon serve, or pass ovon_agent.serve(config=...) a dict of plain values"
+            )
         if self.privileged and not self.cfg.allow_privileged:
             self.close()
             raise ConfigError(
@@ -243,9 +260,17 @@ class RemoteAgent:
             client.close()
 
 
-def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None, row_name: str = "") -> str:
+@dataclass(frozen=True)
+class Handshake:
+    """What a served agent says it is: its name (the table's row unless --name) and its config."""
+
+    name: str
+    config: dict
+
+
+def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None, row_name: str = "") -> Handshake:
     """Before any work: the address parses, the agent answers the handshake and the run allows what it
-    asks for. Returns the name the agent introduces itself with (checked as a row name unless `row_name`, the
+    asks for. Returns what the agent says it is (its name checked as a row name unless `row_name`, the
     --name that replaces it, is given)."""
     if agent_kwargs:
         key = next(iter(agent_kwargs))
@@ -257,7 +282,7 @@ def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None
     parse_address(agent)
     remote = RemoteAgent(agent, cfg)
     try:
-        name = remote.name
+        name, config = remote.name, remote.agent_config
     finally:
         remote.close()
     from ovon.agents.base import ROW_NAME as domain
@@ -268,4 +293,4 @@ def check_remote(agent: str, cfg: RemoteConfig, agent_kwargs: dict | None = None
             f"table (expected {domain.describe('a string')}); fix: pass --name NAME, or serve the agent under "
             "another name (ovon serve --name, ovon_agent.serve(name=...))"
         )
-    return name
+    return Handshake(name, config)

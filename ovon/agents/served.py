@@ -8,9 +8,11 @@ experts, which need the navigation grid, are refused here.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from ovon.agents import AgentError, check_agent, load_agent_class, make_agent
+from ovon.runfolder import file_sha256
 
 
 class ServedAgent:
@@ -52,3 +54,26 @@ def servable_factory(agent: str, kwargs: dict | None = None):
         )
     check_agent(agent, kwargs)
     return lambda: ServedAgent(make_agent(agent, **kwargs))
+
+
+def checkpoint_file(checkpoint: object) -> Path | None:
+    """The policy file an agent's `checkpoint` argument names (a run folder means its policy.pt), None when
+    it names no existing file."""
+    if not isinstance(checkpoint, str) or not checkpoint:
+        return None
+    p = Path(checkpoint) / "policy.pt" if Path(checkpoint).is_dir() else Path(checkpoint)
+    return p if p.is_file() else None
+
+
+def served_config(agent: str, kwargs: dict | None = None) -> dict:
+    """What a served agent says it is in its handshake beside its name: the agent and its arguments, a
+    `checkpoint` by content (where the file lies does not change the agent, retraining it does). An
+    evaluation run folder takes its identity from it, not from the server's address."""
+    kwargs = dict(kwargs or {})
+    out: dict[str, Any] = {"agent": agent}
+    ckpt = checkpoint_file(kwargs.get("checkpoint"))
+    if ckpt is not None:
+        kwargs.pop("checkpoint")
+        out["checkpoint_sha256"] = file_sha256(ckpt)
+    out["agent_kwargs"] = kwargs
+    return out

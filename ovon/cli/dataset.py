@@ -111,15 +111,8 @@ def register(sub) -> None:
     v.set_defaults(func=cmd_validate)
 
 
-def generation_config(args):
-    """The `GenerationConfig` of a `dataset generate` command line: the preset, `--config`, `--set`."""
-    from ovon.config.base import build
-    from ovon.config.dataset import GENERATION_PRESETS, GenerationConfig
-
-    return build(GenerationConfig, GENERATION_PRESETS[args.preset](), args.config or None, args.set)
-
-
 def cmd_generate(args) -> int:
+    from ovon.config.dataset import generation_config
     from ovon.dataset.generate import generate
 
     a = from_args(GenerateArgs, args, split=tuple(args.split) if args.split else None)

@@ -18,7 +18,7 @@ from ovon.cli.scenes import SPLIT_CAPACITY
 from ovon.config.base import Range, constrained, domain_of
 from ovon.config.dataset import GenerationConfig
 from ovon.dataset.io import VAL_SPLITS
-from ovon.evaluate.harness import EvalConfig
+from ovon.evaluate.config import EvalConfig
 
 AGENTS = ("random", "shortest-path", "frontier", "vlfm")
 STOCHASTIC = ("random",)  # the demo runs without noise: every other agent is deterministic

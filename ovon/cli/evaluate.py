@@ -2,22 +2,23 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
-from ovon.config.base import ExistingDir, existing_dir, from_args, in_range, non_empty, non_negative, validate
-from ovon.config.sim import SimConfig
+from ovon.config.base import ExistingDir, existing_dir, from_args, in_range, non_empty, non_negative
+from ovon.config.sim import CameraConfig, cpu_sim_config
 from ovon.dataset.io import VAL_SPLITS
-from ovon.evaluate.harness import EvalConfig, apply_overrides, check_source, parse_noise, with_camera
 
 
-def _csv(s: str) -> list[str]:
-    return [x.strip() for x in s.split(",") if x.strip()]
+def _camera_words(camera: CameraConfig) -> str:
+    """A camera as `--preset`'s help says it, derived from the preset so the two cannot disagree."""
+    vfov = math.degrees(2 * math.atan(math.tan(math.radians(camera.hfov_deg) / 2) * camera.height / camera.width))
+    shape = "portrait" if camera.height > camera.width else "landscape"
+    return (
+        f"{camera.width}x{camera.height} {shape} frames ({camera.hfov_deg:g} deg horizontal, {vfov:.0f} deg vertical)"
+    )
 
 
 def register(sub) -> None:
@@ -60,10 +61,8 @@ def register(sub) -> None:
         "--preset",
         choices=["auto", "cpu", "paper"],
         default="auto",
-        help="cpu: 160x120 landscape frames (32 deg vertical field; --set sim.camera.width=72 --set "
-        "sim.camera.height=128 keeps the paper's portrait view); paper: the 360x640 Stretch camera; "
-        "auto: the camera a policy "
-        "checkpoint was trained with, else cpu",
+        help=f"cpu: {_camera_words(cpu_sim_config().camera)}; paper: the Stretch camera, "
+        f"{_camera_words(CameraConfig())}; auto: the camera a policy checkpoint was trained with, else cpu",
     )
     p.add_argument(
         "--set",
@@ -115,152 +114,14 @@ def register(sub) -> None:
     v.set_defaults(func=cmd_video)
 
 
-def _agent_kwargs(items: list[str], checkpoint: str | None) -> dict:
-    from ovon.config.base import ConfigError
-
-    kwargs = {}
-    for item in items:
-        k, sep, v = item.partition("=")
-        if not sep or not all(part.isidentifier() for part in k.strip().split(".")):
-            raise ConfigError(
-                f"--agent-arg {item!r} is not KEY=VALUE with KEY a Python name (or dotted names, "
-                "for agents that take nested settings); fix: e.g. --agent-arg temperature=0.5 or "
-                "--agent-arg navigator.stop_distance_m=0.6"
-            )
-        try:
-            kwargs[k.strip()] = yaml.safe_load(v) if v != "" else ""
-        except (yaml.YAMLError, RecursionError, ValueError):
-            kwargs[k.strip()] = v  # not YAML: the text itself
-        if not _finite(kwargs[k.strip()]):
-            # the arguments are part of the run's identity (JSON, which has no nan / inf): refused later
-            # with a message naming no key
-            raise ConfigError(
-                f"--agent-arg {item!r}: {v.strip()} is not a finite number (nan and inf cannot be "
-                f"recorded in the run folder); fix: pass a finite number, e.g. --agent-arg "
-                f"{k.strip()}=0.5"
-            )
-    if checkpoint is not None:
-        if "checkpoint" in kwargs:
-            raise ConfigError("--checkpoint and --agent-arg checkpoint=... both given; fix: pass one of them")
-        kwargs["checkpoint"] = checkpoint
-    return kwargs
-
-
-def _finite(value: object) -> bool:
-    """No nan / inf anywhere in a parsed `--agent-arg` value (YAML reads `.nan`, `.inf`, `[1, .nan]`)."""
-    if isinstance(value, float):
-        return math.isfinite(value)
-    if isinstance(value, list | tuple):
-        return all(_finite(v) for v in value)
-    if isinstance(value, dict):
-        return all(_finite(v) for v in value.values())
-    return True
-
-
-def checkpoint_facts(checkpoint: str, task: str) -> dict:
-    """Camera fields a policy checkpoint was trained with ({} when it does not say): a policy sees the
-    world through the resolution it learned on unless the user asks otherwise. Refuses, before any work, a
-    file that is not a policy and a policy of the other task (`task`: the --task being evaluated)."""
-    from ovon.config.base import ConfigError
-    from ovon.config.sim import CameraConfig
-    from ovon.models.policy import policy_task_kind, read_policy_file
-
-    ckpt = read_policy_file(checkpoint, "--checkpoint")
-    kind = policy_task_kind(ckpt)
-    if kind is not None and kind != task:
-        fix = (
-            "evaluate it with --task pointnav (point goals in procedural houses), or use it as VLFM's "
-            "navigator: --agent vlfm --agent-arg navigator=learned --agent-arg navigator.checkpoint=PATH"
-            if kind == "pointnav"
-            else "leave --task pointnav out"
-        )
-        name = {"objectnav": "an ObjectNav", "pointnav": "a PointNav"}
-        raise ConfigError(
-            f"--checkpoint {checkpoint!r} is {name.get(kind, kind)} policy, this is "
-            f"{name.get(task, task)} evaluation; fix: {fix}"
-        )
-    extra = ckpt.get("extra", {}) or {}
-    camera = extra.get("camera") if isinstance(extra, dict) else None
-    fields = {f.name for f in dataclasses.fields(CameraConfig)}
-    return {k: v for k, v in (camera or {}).items() if k in fields and k != "backend"}
-
-
-def eval_config(args) -> EvalConfig:
-    """The command line as an `EvalConfig`, through the one config path (coercion + declared domains), so
-    `--episodes -1`, `--seeds ''` or `--splits ''` are refused with the same one-line message as `--set`."""
-    from ovon.config.base import from_dict
-
-    cfg = from_dict(
-        EvalConfig,
-        {
-            "agent": args.agent,
-            "agent_kwargs": _agent_kwargs(args.agent_arg, args.checkpoint),
-            "data": args.data,
-            "scenes": args.scenes,
-            "procedural": args.procedural or "",
-            "splits": args.splits,
-            "seeds": args.seeds,
-            "episodes": args.episodes,
-            "workers": args.workers,
-            "executor": args.executor,
-            "name": args.name,
-            "strict": args.strict,
-        },
-    )
-    checkpoint = cfg.agent_kwargs.get("checkpoint") if args.agent in ("policy", "dagrl-od") else None
-    camera = checkpoint_facts(str(checkpoint), "objectnav") if checkpoint else {}
-    if args.preset == "paper":
-        cfg = dataclasses.replace(cfg, sim=SimConfig())
-    elif args.preset == "auto" and checkpoint:
-        if camera:
-            cfg = with_camera(cfg, camera)
-            print(
-                f"camera of the checkpoint: {camera.get('width')}x{camera.get('height')} (--preset cpu|paper overrides)"
-            )
-    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, noise=parse_noise(args.noise)))
-    return validate(apply_overrides(cfg, args.set))
-
-
-def pointnav_config(args) -> EvalConfig:
-    """The command line as a PointNav `EvalConfig` (`ovon.evaluate.pointnav`): the checkpoint's task and
-    camera unless --set says otherwise."""
-    from ovon.config.base import from_dict
-    from ovon.evaluate.pointnav import checkpoint_task, pointnav_defaults
-
-    kwargs = _agent_kwargs(args.agent_arg, args.checkpoint)
-    data = {
-        "agent": args.agent,
-        "agent_kwargs": kwargs,
-        "data": args.data or "",
-        "scenes": args.scenes or "",
-        "procedural": args.procedural or "",
-        "seeds": args.seeds,
-        "workers": args.workers,
-        "executor": args.executor,
-        "name": args.name,
-    }
-    if args.episodes is not None:
-        data["episodes"] = args.episodes
-    cfg = from_dict(EvalConfig, {**pointnav_defaults(), **data})
-    check_source(cfg)
-    ckpt = kwargs.get("checkpoint")
-    camera = checkpoint_facts(str(ckpt), "pointnav") if ckpt else {}
-    cfg = dataclasses.replace(cfg, task=checkpoint_task(str(ckpt) if ckpt else None))
-    if args.preset == "paper":
-        cfg = dataclasses.replace(cfg, sim=SimConfig())
-    elif args.preset == "auto" and ckpt:
-        if camera:
-            cfg = with_camera(cfg, camera)
-    elif args.preset == "cpu":
-        cfg = with_camera(cfg, {"width": 160, "height": 120})
-    cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, noise=parse_noise(args.noise)))
-    return validate(apply_overrides(cfg, args.set))
-
-
 def cmd_evaluate(args) -> int:
+    from ovon.evaluate.config import eval_config
     from ovon.evaluate.harness import evaluate
 
-    cfg = pointnav_config(args) if args.task == "pointnav" else eval_config(args)
+    notes: list[str] = []
+    cfg = eval_config(args, notes)
+    for note in notes:
+        print(note)
     summary = evaluate(cfg, args.out, progress=not args.no_progress)
     print((Path(args.out) / "table.md").read_text(), end="")
     n = sum(s["episodes"] for s in summary["splits"].values())

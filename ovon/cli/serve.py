@@ -77,18 +77,25 @@ def _is_loopback(host: str) -> bool:
 def cmd_serve(args) -> int:
     from ovon_agent import PROTOCOL, Server
 
-    from ovon.agents.served import servable_factory
-    from ovon.cli.evaluate import _agent_kwargs
-    from ovon.config.base import from_args
+    from ovon.agents.served import servable_factory, served_config
+    from ovon.config.base import ConfigError, from_args
+    from ovon.evaluate.config import parse_agent_args
 
     a = from_args(ServeArgs, args)
     observations = _observations(args.observations)
     token = args.token if args.token is not None else os.environ.get("OVON_REMOTE_TOKEN") or None
-    from ovon.config.base import ConfigError
-
-    factory = servable_factory(a.agent, _agent_kwargs(args.agent_arg, args.checkpoint))
+    kwargs = parse_agent_args(args.agent_arg, args.checkpoint)
+    factory = servable_factory(a.agent, kwargs)
     try:
-        server = Server(factory, a.host, a.port, token=token, name=a.name or a.agent, observations=observations)
+        server = Server(
+            factory,
+            a.host,
+            a.port,
+            token=token,
+            name=a.name or a.agent,
+            observations=observations,
+            config=served_config(a.agent, kwargs),
+        )
     except OSError as e:
         raise ConfigError(
             f"--host {a.host} --port {a.port}: {e}; fix: another --port (0 picks a free one) or a "

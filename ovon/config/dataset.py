@@ -6,9 +6,9 @@ Every field has a declared domain (`ovon.config.base`): a negative episode count
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
-from ovon.config.base import Range, in_range, less, non_empty, non_negative, positive
+from ovon.config.base import Range, build, in_range, less, non_empty, non_negative, positive
 
 
 @dataclass(frozen=True)
@@ -76,3 +76,9 @@ def fast_generation() -> GenerationConfig:
 
 
 GENERATION_PRESETS = {"paper": paper_generation, "fast": fast_generation}
+
+
+def generation_config(args: Any) -> GenerationConfig:
+    """The `GenerationConfig` of an `ovon dataset generate` command line (an argparse namespace): the
+    preset, `--config` (YAML), `--set`."""
+    return build(GenerationConfig, GENERATION_PRESETS[args.preset](), args.config or None, args.set)

@@ -183,8 +183,8 @@ def render_video(
     """`agent_view`: add the agent's `debug_frame` panel when its class has one (see the module docstring).
     `data` / `scenes`: the episode dataset and scenes roots when they moved (default: the run's own,
     see `run_input`). `out` is checked before the episode is replayed (rendering it takes a while)."""
+    from ovon.dataset.episodes import load_specs
     from ovon.env import make_objectnav
-    from ovon.evaluate.harness import load_specs
 
     out = check_output_path(
         out, "--out", expected="the path of an .mp4 file", example="episode.mp4", suffixes=VIDEO_SUFFIXES

@@ -83,7 +83,7 @@ class EpisodeSource:
         if self.data:
             if not self.scenes:
                 raise ValueError("--data needs --scenes")
-            from ovon.evaluate.harness import load_specs
+            from ovon.dataset.episodes import load_specs
 
             specs = load_specs(self.data, self.scenes, self.split, self.limit)
             if not specs:

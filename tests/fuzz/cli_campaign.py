@@ -872,7 +872,7 @@ def check_output(case: Case, before: dict[str, bytes]) -> str:
         sys.path.insert(0, str(ROOT))
         import warnings
 
-        from ovon.evaluate.harness import load_specs
+        from ovon.dataset.episodes import load_specs
 
         for split in splits:
             name = {"val_unseen_hard": "val_unseen"}.get(split, split)

@@ -16,9 +16,10 @@ Wire (protocol 1, ZeroMQ DEALER -> ROUTER over TCP): every message is a multipar
 frame is a msgpack map and whose other frames are raw array buffers; an array inside the map is
 `{"$nd": frame_index, "dtype": "<f4", "shape": [120, 160]}`. No pickle, no pixels in JSON. Requests:
 `hello` (protocol, token, allow_privileged) -> the agent's name, wanted observations, whether it needs the
-privileged channel and whether it batches; `reset` / `act` with a list of items (`stream`, `info` and / or
-`obs`) -> one action per item; `close`. A bad request gets `{"op": "error", "error": "..."}`; the server
-never stops on one. The full description is docs/remote_protocol.md in the ovon repository.
+privileged channel, whether it batches and its config (what it is, for run folder identities); `reset` /
+`act` with a list of items (`stream`, `info` and / or `obs`) -> one action per item; `close`. A bad
+request gets `{"op": "error", "error": "..."}`; the server never stops on one. The full description is
+docs/remote_protocol.md in the ovon repository.
 
 Streams: the client runs several episodes at once (evaluation workers, several environments per worker);
 each has a stream number. `serve(SomeClass)` or `serve(factory)` builds one agent per stream; an agent
@@ -169,7 +170,10 @@ class Server:
     stream goes to it: it needs `act_batch` to keep several episodes apart). `observations`: what the agent
     wants sent (default: `agent.observations`, else everything; leaving out "rgb" saves the client its
     colour rendering). `token`: a shared secret the client must present (not encryption: keep the server
-    on loopback or behind an SSH tunnel on untrusted networks)."""
+    on loopback or behind an SSH tunnel on untrusted networks). `config`: what the agent is beside its name
+    (its settings, a checkpoint's hash; plain values): with the name, it identifies the evaluation run
+    folders the agent writes, so the same agent served at another address continues them and another one
+    is refused."""
 
     def __init__(
         self,
@@ -180,6 +184,7 @@ class Server:
         token: str | None = None,
         name: str | None = None,
         observations: Sequence[str] | None = None,
+        config: dict[str, Any] | None = None,
         log: Callable[[str], None] | None = None,
     ) -> None:
         if inspect.isclass(agent) or (callable(agent) and not _is_agent(agent)):
@@ -205,6 +210,10 @@ class Server:
         if unknown:
             raise ValueError(f"observations {unknown} are not provided by ovon (it sends {list(OBSERVATIONS)})")
         self.privileged = bool(getattr(self.first, "privileged", False))
+        if config is not None and not isinstance(config, dict):
+            raise TypeError(f"config must be a dict of plain values (what the agent is), got a {type(config).__name__}")
+        self.config = dict(config or {})
+        msgpack.packb(self.config)  # a value msgpack cannot send fails here, not in every handshake
         self.token = token or None
         self.log = log or (lambda line: print(line, file=sys.stderr, flush=True))
         self._context = zmq.Context()
@@ -321,6 +330,7 @@ class Server:
             "observations": self.observations,
             "privileged": self.privileged,
             "batch": self.batched,
+            "config": self.config,
             "server": f"ovon_agent {__version__}",
         }
 
@@ -452,9 +462,10 @@ def serve(
     token: str | None = None,
     name: str | None = None,
     observations: Sequence[str] | None = None,
+    config: dict[str, Any] | None = None,
 ) -> None:
     """Serve `agent` (an object, its class or a factory; see `Server`) until Ctrl-C."""
-    server = Server(agent, host, port, token=token, name=name, observations=observations)
+    server = Server(agent, host, port, token=token, name=name, observations=observations, config=config)
     server.log(f"ovon_agent: serving {server.name!r} (protocol {PROTOCOL}) on {server.address}; stop with Ctrl-C")
     try:
         server.serve_forever()
