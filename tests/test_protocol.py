@@ -62,4 +62,39 @@ def test_the_authors_settings_are_named_and_anything_else_is_custom_with_its_dif
     assert cpu["fingerprint"] != paper["fingerprint"]
     assert protocol_card(_config(), episodes, agent)["fingerprint"] == paper["fingerprint"]
     oracle = protocol_card(_config(), episodes, {**agent, "oracle_perception": True})
-    assert oracle["name"] == "hm3d-ovon" and oracle["fingerprint"] != paper["fingerprint"]
+    # the fingerprint is the protocol (rules and episodes), not the agent: the card states the oracle beside it
+    assert oracle["name"] == "hm3d-ovon" and oracle["fingerprint"] == paper["fingerprint"]
+    assert oracle["agent"]["oracle_perception"] and not paper["agent"]["oracle_perception"]
+
+
+def test_cards_subsets_and_reports_from_the_command_line(tiny_dataset, tiny_scenes, tmp_path, capsys):
+    import json
+
+    sub = tmp_path / "two.json"
+    assert ovon(["dataset", "subset", str(tiny_dataset), "--size", "2", "--name", "two", "--out", str(sub)]) == 0
+    common = ["--data", str(tiny_dataset), "--scenes", str(tiny_scenes), "--splits", "val_seen", "--seeds", "0"]
+    common += ["--workers", "1", "--no-progress", "--agent", "shortest-path"]
+    assert ovon(["evaluate", *common, "--subset", str(sub), "--out", str(tmp_path / "cpu")]) == 0
+    card = json.loads((tmp_path / "cpu" / "summary.json").read_text())["protocol"]
+    assert card["name"] == "custom" and card["episodes"]["set"] == "subset two"
+    assert card["episodes"]["splits"] == {"val_seen": 2} and card["agent"]["privileged"]
+    assert "Protocol: custom" in (tmp_path / "cpu" / "table.md").read_text()
+    paper = ["--subset", str(sub), "--protocol", "hm3d-ovon", "--set", "task.max_steps=60"]
+    assert ovon(["evaluate", *common, *paper, "--out", str(tmp_path / "paper")]) == 0
+    card2 = json.loads((tmp_path / "paper" / "summary.json").read_text())["protocol"]
+    assert card2["differs_from"]["hm3d-ovon"] == ["task.max_steps 60 (hm3d-ovon: 500)"]
+    assert card2["episodes"]["ids_sha256"] == card["episodes"]["ids_sha256"]
+    assert card2["fingerprint"] != card["fingerprint"]
+    assert ovon(["report", str(tmp_path / "cpu"), str(tmp_path / "paper"), "--out", str(tmp_path / "rep")]) == 0
+    report = (tmp_path / "rep" / "report.md").read_text()
+    assert "ran under different protocols" in report and f"[protocol {card['fingerprint']}]" in report
+    capsys.readouterr()
+    for bad, says in (
+        (["--subset", "nope"], "--subset 'nope': neither a subset file nor a named subset"),
+        (["--protocol", "habitat"], "--protocol 'habitat' is not a protocol ovon knows (known: hm3d-ovon)"),
+    ):
+        assert ovon(["evaluate", *common, *bad, "--out", str(tmp_path / "bad")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert says in err and "\n" not in err
+    assert ovon(["dataset", "verify", str(tiny_dataset), "--scenes", str(tiny_scenes)]) == 0
+    assert "usable episodes" in capsys.readouterr().out

@@ -146,7 +146,9 @@ def test_a_clean_split_reports_zero_skipped_and_keeps_the_table(tiny_dataset, ti
     assert rc == 0, errors
     entry = json.loads((out / "summary.json").read_text())["splits"]["val_seen"]
     assert entry["skipped"] == {"picked": 2, "count": 0, "reasons": {}}
-    assert (out / "table.md").read_text().count("\n") == 3  # header, rule, one row: nothing skipped to note
+    table = (out / "table.md").read_text()
+    assert "skipped" not in table  # nothing skipped to note: header, rule, one row, then the protocol line
+    assert table.splitlines()[3:] == ["", table.splitlines()[-1]] and table.splitlines()[-1].startswith("- Protocol:")
 
 
 @pytest.mark.parametrize(

@@ -25,7 +25,7 @@ from ovon.config.base import (
     non_empty,
     positive,
 )
-from ovon.dataset.io import HELD_OUT_SPLITS, SPLIT_NAME_PATTERN
+from ovon.dataset.io import HELD_OUT_SPLITS, SPLIT_NAME_PATTERN, VAL_SPLITS
 from ovon.dataset.io import SPLITS as _SPLITS
 from ovon.dataset.splits import SplitConfig
 
@@ -59,6 +59,21 @@ class ValidateArgs:
     scenes: str = existing_dir(flag="--scenes")
     split: tuple[str, ...] | None = non_empty(None, each=SPLIT_NAME, distinct=True, flag="--split")
     max_episodes_per_scene: int | None = positive(None, flag="--max-episodes-per-scene")
+
+
+@dataclass(frozen=True)
+class VerifyArgs:
+    data: str = existing_dir(flag="DATA")
+    scenes: str = existing_dir("", optional=True, flag="--scenes")
+
+
+@dataclass(frozen=True)
+class SubsetArgs:
+    data: str = existing_dir(flag="DATA")
+    size: int = in_range(360, 1, 10_000_000, flag="--size")
+    name: str = constrained("", Pattern(r"([A-Za-z0-9][A-Za-z0-9_.-]*)?", "letters, digits, _ . -"), flag="--name")
+    split: tuple[str, ...] = non_empty(VAL_SPLITS, each=SPLIT_NAME, distinct=True, flag="--split")
+    out: str = non_empty("subset.json", flag="--out")
 
 
 @dataclass(frozen=True)
@@ -109,6 +124,19 @@ def register(sub) -> None:
     v.add_argument("--split", action="append")
     v.add_argument("--max-episodes-per-scene")
     v.set_defaults(func=cmd_validate)
+
+    ve = dsub.add_parser("verify", help="inventory of a download: junk files, empty split files, name mix-ups, gaps")
+    ve.add_argument("data")
+    ve.add_argument("--scenes", help="scene-datasets root: also report scenes referenced but missing")
+    ve.set_defaults(func=cmd_verify)
+
+    su = dsub.add_parser("subset", help="a canonical episode subset chosen by content (the same for everyone)")
+    su.add_argument("data")
+    su.add_argument("--size", required=True, help="episodes per split")
+    su.add_argument("--name", help="the subset's name (default: size<N>)")
+    su.add_argument("--split", action="append", help="split to include (repeatable; default: the val splits)")
+    su.add_argument("--out", required=True, help="JSON file for `ovon evaluate --subset FILE`")
+    su.set_defaults(func=cmd_subset)
 
 
 def cmd_generate(args) -> int:
@@ -235,3 +263,23 @@ def cmd_validate(args) -> int:
     status = "OK" if rep.ok else f"{sum(rep.counts.values())} problem(s): {dict(rep.counts)}"
     print(f"validated {rep.episodes} episodes in {rep.shards} shards: {status}")
     return 0 if rep.ok else 1
+
+
+def cmd_verify(args) -> int:
+    from ovon.dataset.verify import verify_dataset
+
+    a = from_args(VerifyArgs, args)
+    rep = verify_dataset(a.data, a.scenes or None)
+    print(rep.table(), end="")
+    return 0 if rep.ok else 1
+
+
+def cmd_subset(args) -> int:
+    from ovon.dataset.subset import make_subset, write_subset
+
+    a = from_args(SubsetArgs, args, split=tuple(args.split) if args.split else None)
+    subset = make_subset(a.data, a.size, a.name, a.split)
+    path = write_subset(subset, a.out)
+    counts = ", ".join(f"{s} {len(v)}" for s, v in sorted(subset.splits.items()))
+    print(f"subset {subset.name!r}: {counts} episodes (ids sha256 {subset.ids_sha256[:12]}); wrote {path}")
+    return 0

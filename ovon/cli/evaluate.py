@@ -80,6 +80,18 @@ def register(sub) -> None:
         help="refuse a split holding an invalid episode (one line naming the file and the episode) "
         "instead of skipping it with a counted warning",
     )
+    p.add_argument(
+        "--subset",
+        metavar="FILE|NAME",
+        help="run only a canonical subset of each split: a named one (mini: 360 per split) or a file written by "
+        "`ovon dataset subset`",
+    )
+    p.add_argument(
+        "--protocol",
+        metavar="NAME",
+        help="start from a named protocol's settings (hm3d-ovon: the authors' camera, task and no noise); an "
+        "option that changes one makes the run's protocol card say custom",
+    )
     p.add_argument("--out", required=True, help="run folder (episodes.jsonl, summary.json, table.md)")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_evaluate)

@@ -41,6 +41,7 @@ from ovon.dataset.io import SPLIT_NAME_PATTERN, VAL_SPLITS
 SPLIT_NAME = Pattern(SPLIT_NAME_PATTERN, "split folder names (letters, digits, _ . -)")
 HOUSE_SEEDS = Pattern(r" *([0-9]+(-[0-9]+)? *(, *[0-9]+(-[0-9]+)? *)*)?", "house seeds like 80000-80003 or 0,5-7")
 POINTNAV_SPLIT = "val"  # PointNav episodes are sampled in held-out houses: one split
+SUBSET = Pattern(r"[^\n]*", "a named subset (mini) or a subset file")
 
 
 @dataclass
@@ -63,6 +64,9 @@ class EvalConfig:
     name: str | None = constrained(None, ROW_NAME, flag="--name")
     remote: RemoteConfig = field(default_factory=RemoteConfig)  # --agent remote:HOST:PORT only
     strict: bool = False  # refuse a split holding an invalid episode instead of skipping it (counted)
+    # The episodes to run: "" = the splits (or their first `episodes`), a named subset (`mini`) or a subset file
+    # written by `ovon dataset subset` (ovon.dataset.subset: chosen by content, the same for everyone).
+    subset: str = constrained("", SUBSET, flag="--subset")
     rules: ClassVar = (
         rule(
             ("task.failed_stop_ends",),
@@ -257,6 +261,19 @@ def checkpoint_facts(checkpoint: str, task: str) -> dict:
     return {k: v for k, v in (camera or {}).items() if k in fields and k != "backend"}
 
 
+def protocol_config(name: str) -> dict[str, Any]:
+    """The EvalConfig fields a named protocol fixes: hm3d-ovon is the authors' rig and task (the defaults of
+    SimConfig and TaskConfig: the Stretch, its 360x640 camera, 500 steps, 0.25 m), without noise."""
+    from ovon.evaluate.protocol import NAMED
+
+    if name not in NAMED:
+        raise ConfigError(
+            f"--protocol {name!r} is not a protocol ovon knows (known: {', '.join(sorted(NAMED))}); fix: name one "
+            "of them, or leave --protocol out and set each option yourself (the card then says custom)"
+        )
+    return {"sim": SimConfig(), "task": TaskConfig()}
+
+
 def eval_config(args: Any, notes: list[str] | None = None) -> EvalConfig:
     """`ovon evaluate`'s options (an argparse namespace) as an `EvalConfig`, through the one config path
     (coercion + declared domains), so `--episodes -1`, `--seeds ''` or `--splits ''` are refused with the
@@ -279,11 +296,14 @@ def eval_config(args: Any, notes: list[str] | None = None) -> EvalConfig:
             "executor": args.executor,
             "name": args.name,
             "strict": args.strict,
+            "subset": getattr(args, "subset", None) or "",
         },
     )
     checkpoint = cfg.agent_kwargs.get("checkpoint") if args.agent in ("policy", "dagrl-od") else None
     camera = checkpoint_facts(str(checkpoint), "objectnav") if checkpoint else {}
-    if args.preset == "paper":
+    if getattr(args, "protocol", None):  # the named protocol's settings first; later options may change them
+        cfg = dataclasses.replace(cfg, **protocol_config(args.protocol))
+    elif args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
     elif args.preset == "auto" and checkpoint:
         if camera:

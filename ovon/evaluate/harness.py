@@ -25,7 +25,9 @@ from ovon.agents.remote import is_remote
 from ovon.atomic import atomic_write_text
 from ovon.config.base import ConfigError, to_dict, validate
 from ovon.dataset.episodes import SplitEpisodes, drop_off_map_starts, load_split
+from ovon.dataset.subset import load_subset, restrict_to_subset
 from ovon.evaluate.config import POINTNAV_SPLIT, EvalConfig, check_episode_source
+from ovon.evaluate.protocol import agent_facts, card_line, episode_set, protocol_card
 from ovon.evaluate.results import (
     RecordWriter,
     coverage_lines,
@@ -57,6 +59,7 @@ MAY_CHANGE = (
     "remote.batch",
     "remote.allow_privileged",
     "strict",
+    "subset",
 )
 # The EvalConfig fields a PointNav run folder is identified by (run.json), in this order.
 POINTNAV_KEYS = ("agent", "agent_kwargs", "procedural", "seeds", "episodes", "workers", "executor", "chunk", "sim",
@@ -125,8 +128,13 @@ def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> dict[str, Spl
     from ovon.dataset.validate import warn_skipped
 
     out = {}
+    subset = load_subset(cfg.subset, cfg.data, cfg.splits) if cfg.subset else None
     for split in cfg.splits:
-        sel = load_split(cfg.data, cfg.scenes, split, cfg.episodes, cfg.strict)
+        if subset is None:
+            sel = load_split(cfg.data, cfg.scenes, split, cfg.episodes, cfg.strict)
+        else:
+            sel = load_split(cfg.data, cfg.scenes, split, None, cfg.strict)
+            sel = restrict_to_subset(sel, subset, split, f"{Path(cfg.data) / split}", cfg.episodes)
         sel = drop_off_map_starts(sel, cfg.sim, workers or cfg.workers, cfg.executor, cfg.strict, cfg.data, cfg.scenes)
         warn_skipped(f"{Path(cfg.data) / split}", sel.skipped, sel.picked)
         if not sel.specs:
@@ -235,10 +243,15 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
             for split, specs in p.specs.items()
             for s in specs
         }
-        return finalize(run_dir, p.name, wanted, p.skipped)
+        subset = load_subset(cfg.subset, cfg.data, cfg.splits).name if cfg.subset else ""
+        episodes = episode_set(p.specs, cfg.seeds, subset, cfg.episodes)
+        card = protocol_card(p.config, episodes, agent_facts(cfg.agent, cfg.agent_kwargs, cfg.remote.allow_privileged))
+        return finalize(run_dir, p.name, wanted, p.skipped, card)
 
 
-def finalize(run_dir: str | Path, name: str, wanted: set | None = None, skipped: dict | None = None) -> dict:
+def finalize(
+    run_dir: str | Path, name: str, wanted: set | None = None, skipped: dict | None = None, protocol: dict | None = None
+) -> dict:
     """episodes.jsonl in canonical order, then the summary and the table of the records in `wanted` (all
     when None), in that order: identical whatever the workers, the executor or the interruptions.
 
@@ -254,8 +267,10 @@ def finalize(run_dir: str | Path, name: str, wanted: set | None = None, skipped:
     for split, entry in summary["splits"].items():
         if skipped and split in skipped:
             entry["skipped"] = skipped[split]
+    if protocol is not None:
+        summary["protocol"] = protocol  # what the numbers were measured under (ovon.evaluate.protocol)
     atomic_write_text(run_dir / "summary.json", json.dumps(summary, indent=2, sort_keys=True))
-    notes = coverage_lines(summary["splits"])
+    notes = coverage_lines(summary["splits"]) + ([card_line(protocol)] if protocol is not None else [])
     table = paper_table({name: summary["splits"]}) + "\n" + ("\n" + "".join(f"- {n}\n" for n in notes) if notes else "")
     atomic_write_text(run_dir / "table.md", table)
     return summary

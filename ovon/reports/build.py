@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
 from ovon.atomic import atomic_write_text, check_output_path
+from ovon.evaluate.protocol import card_line
 from ovon.reports.compare import load_meta, load_run, load_skipped, markdown_report
 from ovon.reports.labels import run_label
 from ovon.reports.plots import plot_failures, plot_sr_per_category, plot_sr_vs_distance
@@ -13,6 +15,29 @@ from ovon.reports.plots import plot_failures, plot_sr_per_category, plot_sr_vs_d
 
 def _slug(s: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", s)
+
+
+def load_protocol(run_dir: str | Path) -> dict:
+    """The run's protocol card (summary.json), {} for a run written before cards existed."""
+    path = Path(run_dir) / "summary.json"
+    try:
+        card = json.loads(path.read_text()).get("protocol") if path.exists() else None
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return card if isinstance(card, dict) else {}
+
+
+def protocol_section(labels: list[str], cards: list[dict], mixed: bool) -> str:
+    """The protocol every row ran under (`ovon.evaluate.protocol`): one line when they agree, else a warning
+    and one line per row, so numbers of different protocols are never read as comparable."""
+    lines = ["## Protocol", ""]
+    if not mixed:
+        lines.append(card_line(cards[0]) if cards and cards[0] else "Protocol: not recorded (runs older than cards)")
+    else:
+        lines.append("**The rows ran under different protocols: their numbers are not comparable.**")
+        lines.append("")
+        lines += [f"- {label}: {card_line(c) if c else 'not recorded'}" for label, c in zip(labels, cards)]
+    return "\n".join(lines) + "\n"
 
 
 def build_report(run_dirs: list[str | Path], out_dir: str | Path) -> Path:
@@ -28,10 +53,15 @@ def build_report(run_dirs: list[str | Path], out_dir: str | Path) -> Path:
         seen[label] = seen.get(label, 0) + 1
         if seen[label] > 1:
             labels[i] = f"{label} ({Path(run_dirs[i]).name})"
+    cards = [load_protocol(d) for d in run_dirs]
+    mixed = len({c.get("fingerprint") for c in cards}) > 1
+    if mixed:  # rows of different protocols are not comparable: each says which it ran under
+        labels = [f"{label} [protocol {c.get('fingerprint', 'unknown')}]" for label, c in zip(labels, cards)]
     runs = [(label, recs) for label, (_, recs) in zip(labels, loaded)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     md = markdown_report(runs, metas, [load_skipped(d) for d in run_dirs])
+    md += "\n" + protocol_section(labels, cards, mixed)
     figs = [plot_sr_vs_distance(runs, out / "sr_vs_distance.png")]
     names = [name for name, _ in loaded]
     for i, (label, recs) in enumerate(runs):

@@ -1,0 +1,70 @@
+"""`ovon compare`: paired differences, bootstrap intervals and the sign test, on known outcomes and on real runs."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from ovon.cli.main import main as ovon
+from ovon.reports.paired import compare_pairs, pair_records
+
+
+def _records(successes: list[int], seeds: int = 1, split: str = "val_seen") -> list[dict]:
+    return [
+        {"split": split, "seed": s, "scene": "hm3d/val/x.glb", "episode_id": str(i), "success": bool(v), "spl": 0.5 * v}
+        for s in range(seeds)
+        for i, v in enumerate(successes)
+    ]
+
+
+def test_a_clear_gain_has_an_interval_above_zero_and_a_small_sign_test_p():
+    a, b = _records([0] * 40), _records([1] * 30 + [0] * 10)
+    res = {r.split: r for r in compare_pairs(pair_records(a, b, "A", "B"), resamples=2000)}
+    sr, spl = res["val_seen"].stats
+    assert sr.diff == pytest.approx(0.75) and sr.ci_low > 0.5 and sr.verdict == "B better"
+    assert spl.diff == pytest.approx(0.375)
+    assert (res["val_seen"].sign.b_wins, res["val_seen"].sign.a_wins) == (30, 0)
+    assert res["val_seen"].sign.p_value < 1e-8
+    assert res["all"].episodes == 40
+
+
+def test_the_same_runs_show_no_difference_and_seeds_move_with_their_episode():
+    a = _records([1, 0, 1, 0, 1] * 4, seeds=3)
+    (r, _all) = compare_pairs(pair_records(a, a, "A", "A"), resamples=500)
+    assert (r.stats[0].diff, r.stats[0].ci_low, r.stats[0].ci_high) == (0, 0, 0)
+    assert r.sign.p_value == 1.0 and r.episodes == 20 and r.seeds == 3
+
+
+def test_balanced_disagreement_is_no_difference():
+    a, b = _records([1, 0] * 20), _records([0, 1] * 20)
+    sr = compare_pairs(pair_records(a, b, "A", "B"), resamples=2000)[0].stats[0]
+    assert sr.diff == 0 and sr.ci_low < 0 < sr.ci_high and sr.verdict == "no difference shown"
+
+
+def test_runs_of_different_episodes_are_refused_in_one_line():
+    with pytest.raises(ValueError, match=r"A and B ran different episodes \(1 only in A, 0 only in B") as e:
+        pair_records(_records([1, 1]), _records([1]), "A", "B")
+    assert "\n" not in str(e.value)
+
+
+def test_cli_compares_real_runs_and_refuses_mismatched_ones(tiny_dataset, tiny_scenes, tmp_path, capsys):
+    common = ["--data", str(tiny_dataset), "--scenes", str(tiny_scenes), "--splits", "val_seen", "--seeds", "0"]
+    common += ["--workers", "1", "--no-progress"]
+    for agent, n in (("random", "6"), ("shortest-path", "6"), ("shortest-path", "3")):
+        out = tmp_path / f"{agent}{n}"
+        assert ovon(["evaluate", "--agent", agent, *common, "--episodes", n, "--out", str(out)]) == 0
+    capsys.readouterr()
+    rc = ovon(["compare", str(tmp_path / "random6"), str(tmp_path / "shortest-path6"), "--out", str(tmp_path / "c")])
+    assert rc == 0
+    result = json.loads((tmp_path / "c" / "compare.json").read_text())
+    (comp,) = result["comparisons"]
+    assert [s["split"] for s in comp["splits"]] == ["val_seen", "all"]
+    sr = comp["splits"][0]["stats"][0]
+    assert sr["b"] == 1.0 and sr["diff"] > 0.5 and sr["ci_low"] > 0
+    assert "| shortest-path | val_seen | 6 x 1 |" in (tmp_path / "c" / "compare.md").read_text()
+    capsys.readouterr()
+    assert ovon(["compare", str(tmp_path / "random6"), str(tmp_path / "shortest-path3")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "ran different episodes (3 only in random" in err and "\n" not in err
+    assert ovon(["compare", str(tmp_path / "random6")]) == 2
