@@ -642,3 +642,40 @@ def test_within_noise_means_the_deciding_gaps_could_flip_the_verdict() -> None:
     assert close_loss["verdict"] == "does not hold" and close_loss["within_noise"]
     flat = judge_check(Check(kind="flat", refs=("dagrl", "bc", "dagger"), tolerance=9.0), lambda r, m: table[r])
     assert flat["verdict"] == "does not hold" and flat["within_noise"]  # spread 10 vs 9, stds 1 + 0.5
+
+
+def test_comparisons_on_the_same_episodes_get_a_paired_verdict_beside_the_two_std_rule() -> None:
+    """Two runs 0.5 points apart are "within noise" by the std rule, yet on the same episodes the paired
+    interval can show the gap; a pair without shared episodes (None) gets no paired verdict."""
+    from ovon.experiments.definitions import Check
+    from ovon.experiments.findings import judge_check
+
+    table = {"dagrl": (20.0, 1.0), "dagger": (19.5, 1.0), "bc": (5.0, 1.0)}
+    stats = {
+        ("dagrl", "dagger"): {"diff": 0.5, "ci_low": 0.1, "ci_high": 0.9, "p": 0.01},
+        ("dagrl", "bc"): {"diff": 15.0, "ci_low": -1.0, "ci_high": 30.0, "p": 0.2},
+    }
+    look = lambda r, m: table[r]  # noqa: E731
+    shown = judge_check(Check(kind="greater", pairs=(("dagrl", "dagger"),)), look, lambda a, b, m: stats[(a, b)])
+    assert shown["within_noise"] and shown["paired"]["verdict"] == "holds"
+    assert "dagrl - dagger +0.5 [+0.1, +0.9]" in shown["paired"]["numbers"]
+    wide = judge_check(Check(kind="best", target="dagrl", others=("dagger", "bc")), look, lambda a, b, m: stats[(a, b)])
+    assert wide["paired"]["verdict"].startswith("not shown")
+    assert "paired" not in judge_check(Check(kind="greater", pairs=(("dagrl", "bc"),)), look, lambda a, b, m: None)
+
+
+def test_paired_difference_pairs_two_table_entries_on_their_shared_episodes() -> None:
+    from ovon.experiments.report import paired_difference
+
+    def recs(wins: list[int]) -> list[dict]:
+        return [
+            {"split": "val_seen", "seed": 0, "scene": "s", "episode_id": str(i), "success": bool(w), "spl": 0.5 * w}
+            for i, w in enumerate(wins)
+        ]
+
+    evals = {"a": {"records": recs([1] * 20)}, "b": {"records": recs([0] * 20)}, "c": {"records": recs([1] * 5)}}
+    a, b = {"eval": "a", "split": "val_seen"}, {"eval": "b", "split": "val_seen"}
+    d = paired_difference(evals, a, b, "sr")
+    assert d["diff"] == 100.0 and d["ci_low"] == 100.0 and d["p"] < 1e-5
+    assert paired_difference(evals, a, {"eval": "c", "split": "val_seen"}, "sr") is None  # other episodes
+    assert paired_difference(evals, a, {"eval": "b", "split": "val_unseen"}, "sr") is None  # other split

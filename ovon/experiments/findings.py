@@ -13,6 +13,13 @@ from ovon.experiments.definitions import Check, Finding
 
 Value = tuple[float, float]  # (mean, std) in %
 Lookup = Callable[[str, str], Value | None]  # (ref, metric) -> value, None when not run
+# (ref a, ref b, metric) -> the paired difference a - b on their shared episodes, in % points:
+# {"diff", "ci_low", "ci_high", "p"}; None when the two did not run the same episodes (or did not run)
+Paired = Callable[[str, str, str], dict | None]
+PAIRED_NOTE = (
+    "paired: the per-episode difference on the episodes both ran, with a 95% bootstrap interval over episodes; "
+    "a comparison holds when its interval excludes 0 in the claimed direction"
+)
 
 RULE_NOTE = (
     "means over evaluation seeds, in % points; 'within noise' where a deciding gap is smaller than the sum "
@@ -50,7 +57,29 @@ def _gaps(pairs: list[tuple[Value, Value]]) -> tuple[bool, bool, list[float]]:
     return all(oks), _deciding(all(oks), oks, close), gaps
 
 
-def judge_check(chk: Check, look: Lookup) -> dict:
+def paired_check(chk: Check, paired: Paired | None) -> dict | None:
+    """The paired verdict of a `best` / `greater` check (same split, same episodes), else None: holds when
+    every interval lies above 0, does not hold when one lies below 0, otherwise not shown."""
+    if paired is None or chk.kind not in ("best", "greater"):
+        return None
+    pairs = [(chk.target, o) for o in chk.others] if chk.kind == "best" else list(chk.pairs)
+    stats = [paired(a, b, chk.metric) for a, b in pairs]
+    if any(st is None for st in stats):
+        return None
+    if all(st["ci_low"] > 0 for st in stats):
+        verdict = "holds"
+    elif any(st["ci_high"] < 0 for st in stats):
+        verdict = "does not hold"
+    else:
+        verdict = "not shown (an interval includes 0)"
+    numbers = "; ".join(
+        f"{a} - {b} {st['diff']:+.1f} [{st['ci_low']:+.1f}, {st['ci_high']:+.1f}], sign test p {st['p']:.2g}"
+        for (a, b), st in zip(pairs, stats)
+    )
+    return {"verdict": verdict, "numbers": numbers}
+
+
+def judge_check(chk: Check, look: Lookup, paired: Paired | None = None) -> dict:
     """{"verdict": holds | does not hold | not run, "within_noise": bool, "numbers": text}."""
     refs = {r for r in (chk.target, *chk.others, *chk.refs, *(x for p in (*chk.pairs, *chk.against) for x in p)) if r}
     values = {r: look(r, chk.metric) for r in refs}
@@ -89,12 +118,17 @@ def judge_check(chk: Check, look: Lookup) -> dict:
         noisy = abs(mb - ma) < sa + sb
         each_a, each_b = ", ".join(f"{d:.1f}" for d in da), ", ".join(f"{d:.1f}" for d in db)
         numbers = f"mean drop {ma:.1f} ({each_a}) vs {mb:.1f} ({each_b})"
-    return {"verdict": "holds" if holds else "does not hold", "within_noise": bool(noisy), "numbers": numbers}
+    out = {"verdict": "holds" if holds else "does not hold", "within_noise": bool(noisy), "numbers": numbers}
+    pv = paired_check(chk, paired)
+    if pv is not None:
+        out["paired"] = pv
+    return out
 
 
-def judge(finding: Finding, look: Lookup) -> dict:
-    """A finding holds when every check holds; "not run" when any check lacks numbers."""
-    checks = [{"rule": rule_text(c), **judge_check(c, look)} for c in finding.checks]
+def judge(finding: Finding, look: Lookup, paired: Paired | None = None) -> dict:
+    """A finding holds when every check holds; "not run" when any check lacks numbers. Checks that compare runs
+    on the same episodes also get a paired verdict (`paired_check`) beside the two-std rule."""
+    checks = [{"rule": rule_text(c), **judge_check(c, look, paired)} for c in finding.checks]
     verdicts = {c["verdict"] for c in checks}
     verdict = "not run" if "not run" in verdicts else ("does not hold" if "does not hold" in verdicts else "holds")
     noisy = verdict != "not run" and _deciding(

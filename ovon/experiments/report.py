@@ -18,7 +18,7 @@ from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, paper_numbers, parse_ref, row_eval
-from ovon.experiments.findings import RULE_NOTE, judge
+from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, judge
 from ovon.experiments.outputs import last_update
 from ovon.experiments.plan import PERCEPTION
 from ovon.experiments.provenance import (
@@ -225,11 +225,40 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
 
         return lookup
 
+    def paired(ref_a: str, ref_b: str, metric: str) -> dict | None:
+        return paired_difference(
+            evals, entries[parse_ref(ref_a, exp.source)], entries[parse_ref(ref_b, exp.source)], metric
+        )
+
     res["findings"] = [
-        {"id": f.id, "claim": f.claim, "note": f.note, "ours": judge(f, look("ours")), "paper": judge(f, look("paper"))}
+        {
+            "id": f.id,
+            "claim": f.claim,
+            "note": f.note,
+            "ours": judge(f, look("ours"), paired),
+            "paper": judge(f, look("paper")),
+        }
         for f in exp.findings
     ]
     return res
+
+
+def paired_difference(evals: dict[str, dict], a: dict, b: dict, metric: str) -> dict | None:
+    """a - b in % points on the episodes both table entries ran (`ovon.reports.paired`); None when they are
+    on different splits or episodes, or either has not run."""
+    from ovon.reports.paired import compare_pairs, pair_records
+
+    if a["split"] != b["split"]:
+        return None
+    ra, rb = ([r for r in evals[e["eval"]].get("records") or [] if r["split"] == e["split"]] for e in (a, b))
+    if not ra or not rb:
+        return None
+    try:
+        result = compare_pairs(pair_records(rb, ra, b["eval"], a["eval"]))[0]
+    except ValueError:  # different episodes: nothing to pair
+        return None
+    st = next(s for s in result.stats if s.metric == metric)
+    return {"diff": 100 * st.diff, "ci_low": 100 * st.ci_low, "ci_high": 100 * st.ci_high, "p": result.sign.p_value}
 
 
 def run_command_line(plan: Plan) -> str:
@@ -341,6 +370,8 @@ def findings_markdown(findings: list[dict]) -> list[str]:
         lines.append(f"- **({f['id']}) {f['claim']}**: here **{verdict}**; paper: {paper['verdict']}.")
         for c in ours["checks"]:
             lines.append(f"  - rule: {c['rule']}; ours: {c['numbers']}")
+            if c.get("paired"):
+                lines.append(f"  - paired: **{c['paired']['verdict']}**: {c['paired']['numbers']}")
         if f["note"]:
             lines.append(f"  - note: {f['note']}")
     return lines
@@ -373,7 +404,7 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
         parts += [
             "## The paper's findings here",
             "",
-            f"Rules on {RULE_NOTE}; the paper's verdict is the same rule on its own numbers.",
+            f"Rules on {RULE_NOTE}; the paper's verdict is the same rule on its own numbers. Beside it, {PAIRED_NOTE}.",
             "",
             *findings_markdown(all_findings),
             "",
