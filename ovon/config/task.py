@@ -67,7 +67,7 @@ class TaskConfig:
 def pointnav_task() -> TaskConfig:
     """The PointNav task of the training presets and of `ovon evaluate --task pointnav` without a checkpoint:
     success within 0.36 m (2 agent radii, habitat's PointNav challenge), 150 steps, goals 1-6 m away, and a
-    failed STOP costs 1 (habitat: 0; without it PPO collapsed to STOP-at-once, README "Learned PointNav")."""
+    failed STOP costs 1 (habitat: 0; without it PPO collapsed to STOP-at-once, docs/concepts/learned-policies.md)."""
     return TaskConfig(
         kind="pointnav",
         max_steps=150,

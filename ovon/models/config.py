@@ -91,7 +91,7 @@ class PolicyConfig:
     context: int = in_range(100, 1, 100_000)
     prev_action_dim: int = in_range(32, 0, 65536)
     # The first `num_actions` of STOP FORWARD LEFT RIGHT UP DOWN (docs/spec.md#actions): 4 leaves the camera tilt out,
-    # which RL from scratch at CPU scale needs (README "RL at CPU scale").
+    # which RL from scratch at CPU scale needs (docs/concepts/learned-policies.md, "Rewards for RL from scratch").
     num_actions: int = in_range(6, 4, 6)
     rope_base: float = positive(10000.0)
     norm_eps: float = positive(1e-6)
@@ -192,7 +192,7 @@ def _detector_presets() -> dict[str, DetectorConfig]:
     return {
         # every goal instance covering >= 1% of the frame, nothing else (the task's own "seen" threshold)
         "perfect": DetectorConfig(),
-        # an imperfect open-vocabulary detector (rates argued in the README, "Modular baselines")
+        # an imperfect open-vocabulary detector (docs/concepts/modular-agents.md)
         "noisy": DetectorConfig(min_frame_share=0.02, miss_rate=0.3, fp_rate=0.3, fp_min_similarity=0.4),
         "owlv2": DetectorConfig(kind="owlv2"),
     }

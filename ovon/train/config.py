@@ -35,8 +35,9 @@ class PPOConfig:
     gae_lambda: float = in_range(0.95, 0.0, 1.0)
     normalize_advantages: bool = True
     # The policy PPO acts with and optimises is softmax(logits / temperature). A fine-tune of an imitation
-    # policy that is evaluated at temperature 0.5 (README) should be trained at 0.5 too: at 1 its rollouts
-    # rarely succeed, the sparse reward gives no signal and the policy drifts away from what worked.
+    # policy that is evaluated at temperature 0.5 (docs/concepts/learned-policies.md) should be trained at 0.5
+    # too: at 1 its rollouts rarely succeed, the sparse reward gives no signal and the policy drifts away from
+    # what worked.
     temperature: float = positive(1.0)
     # A transformer acts with a key/value cache of `policy.context` steps per layer that crosses rollout
     # chunks; each cached key was computed from its own step's window, so acting sees layers x (context - 1)
@@ -173,7 +174,7 @@ class TrainConfig:
     stop_loss_weight: float = positive(1.0)
     # Precision of BC's and DAgger's forward and backward passes (torch autocast; weights, optimiser, loss
     # and acting stay float32). bfloat16 halved DAgger's update on this project's CPU (AVX512-BF16; the
-    # README's throughput table) with the same SR, and changes the learned low bits; a CPU without bf16
+    # throughput table in benchmarks/README.md) with the same SR, and changes the learned low bits; a CPU without bf16
     # instructions can be slower (`benchmarks/train_throughput.py --algos dagger,dagger-bf16` tells).
     # PPO keeps float32: its importance ratio compares the update's log-probs with the acting ones.
     learn_dtype: Literal["float32", "bfloat16"] = "float32"
@@ -225,7 +226,7 @@ def _paper() -> TrainConfig:
 
 def _cpu_small() -> TrainConfig:
     """What learns on a 2-core CPU in tens of minutes; each departure from `paper` is there because a
-    run without it failed (see the README, "Learned baselines")."""
+    run without it failed (docs/concepts/learned-policies.md)."""
     return TrainConfig(
         # No previous-action input: with this little data the policy copies its last action (copycat).
         policy=PolicyConfig(
@@ -294,7 +295,7 @@ def _tiny() -> TrainConfig:
 def _pointnav(scale: str) -> TrainConfig:
     """PointNav with PPO (`ovon train --task pointnav`): depth + the goal vector from odometry.
 
-    Why these values (see the README, "Learned PointNav"): the depth-grid encoder (coarse depth + bump
+    Why these values (docs/concepts/learned-policies.md): the depth-grid encoder (coarse depth + bump
     flag, ~65 numbers) instead of a CNN, because on a 2-core CPU the env steps are the budget and a CNN's
     forward/backward would halve them; the camera of the cpu-small policies and of the modular agents'
     measurements (72x128 portrait, 42 deg) so the learned navigator sees in VLFM what it trained on; no

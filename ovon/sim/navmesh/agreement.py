@@ -2,7 +2,7 @@
 habitat-sim keep in their tests): geodesic distances and reachability, an agent trajectory with
 sliding, the top-down navigability map, navigable area and islands.
 
-Used by `benchmarks/navmesh_agreement.py` (the figures in the README) and by the tests, so both
+Used by `benchmarks/navmesh_agreement.py` (benchmarks/README.md) and by the tests, so both
 measure the same thing. Every function takes plain data (parsed JSON / arrays) and returns a dict.
 """
 
