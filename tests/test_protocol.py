@@ -87,7 +87,8 @@ def test_cards_subsets_and_reports_from_the_command_line(tiny_dataset, tiny_scen
     assert card2["fingerprint"] != card["fingerprint"]
     assert ovon(["report", str(tmp_path / "cpu"), str(tmp_path / "paper"), "--out", str(tmp_path / "rep")]) == 0
     report = (tmp_path / "rep" / "report.md").read_text()
-    assert "ran under different protocols" in report and f"[protocol {card['fingerprint']}]" in report
+    assert "ran under different evaluation protocols" in report and f"fingerprint {card['fingerprint']}" in report
+    assert f"fingerprint {card2['fingerprint']}" in report
     capsys.readouterr()
     for bad, says in (
         (["--subset", "nope"], "--subset 'nope': neither a subset file nor a named subset"),

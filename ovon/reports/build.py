@@ -27,6 +27,12 @@ def load_protocol(run_dir: str | Path) -> dict:
     return card if isinstance(card, dict) else {}
 
 
+MIXED_WARNING = (
+    "**These runs ran under different evaluation protocols** (see Protocol at the end: noise, camera, step "
+    "limit or episodes differ), so a gap between rows mixes the agents with the settings."
+)
+
+
 def protocol_section(labels: list[str], cards: list[dict], mixed: bool) -> str:
     """The protocol every row ran under (`ovon.evaluate.protocol`): one line when they agree, else a warning
     and one line per row, so numbers of different protocols are never read as comparable."""
@@ -34,8 +40,6 @@ def protocol_section(labels: list[str], cards: list[dict], mixed: bool) -> str:
     if not mixed:
         lines.append(card_line(cards[0]) if cards and cards[0] else "Protocol: not recorded (runs older than cards)")
     else:
-        lines.append("**The rows ran under different protocols: their numbers are not comparable.**")
-        lines.append("")
         lines += [f"- {label}: {card_line(c) if c else 'not recorded'}" for label, c in zip(labels, cards)]
     return "\n".join(lines) + "\n"
 
@@ -55,12 +59,13 @@ def build_report(run_dirs: list[str | Path], out_dir: str | Path) -> Path:
             labels[i] = f"{label} ({Path(run_dirs[i]).name})"
     cards = [load_protocol(d) for d in run_dirs]
     mixed = len({c.get("fingerprint") for c in cards}) > 1
-    if mixed:  # rows of different protocols are not comparable: each says which it ran under
-        labels = [f"{label} [protocol {c.get('fingerprint', 'unknown')}]" for label, c in zip(labels, cards)]
     runs = [(label, recs) for label, (_, recs) in zip(labels, loaded)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     md = markdown_report(runs, metas, [load_skipped(d) for d in run_dirs])
+    if mixed:  # said before the first table: rows of different protocols are not comparable as they stand
+        title, _, rest = md.partition("\n")
+        md = f"{title}\n\n{MIXED_WARNING}\n{rest}"
     md += "\n" + protocol_section(labels, cards, mixed)
     figs = [plot_sr_vs_distance(runs, out / "sr_vs_distance.png")]
     names = [name for name, _ in loaded]
