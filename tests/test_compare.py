@@ -26,7 +26,7 @@ def test_a_clear_gain_has_an_interval_above_zero_and_a_small_sign_test_p():
     assert spl.diff == pytest.approx(0.375)
     assert (res["val_seen"].sign.b_wins, res["val_seen"].sign.a_wins) == (30, 0)
     assert res["val_seen"].sign.p_value < 1e-8
-    assert res["all"].episodes == 40
+    assert res["(all splits)"].episodes == 40
 
 
 def test_the_same_runs_show_no_difference_and_seeds_move_with_their_episode():
@@ -59,7 +59,7 @@ def test_cli_compares_real_runs_and_refuses_mismatched_ones(tiny_dataset, tiny_s
     assert rc == 0
     result = json.loads((tmp_path / "c" / "compare.json").read_text())
     (comp,) = result["comparisons"]
-    assert [s["split"] for s in comp["splits"]] == ["val_seen", "all"]
+    assert [s["split"] for s in comp["splits"]] == ["val_seen", "(all splits)"]
     sr = comp["splits"][0]["stats"][0]
     assert sr["b"] == 1.0 and sr["diff"] > 0.5 and sr["ci_low"] > 0
     assert "| shortest-path | val_seen | 6 x 1 |" in (tmp_path / "c" / "compare.md").read_text()

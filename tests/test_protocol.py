@@ -89,13 +89,36 @@ def test_cards_subsets_and_reports_from_the_command_line(tiny_dataset, tiny_scen
     report = (tmp_path / "rep" / "report.md").read_text()
     assert "ran under different evaluation protocols" in report and f"fingerprint {card['fingerprint']}" in report
     assert f"fingerprint {card2['fingerprint']}" in report
+    one = tmp_path / "one.json"
+    assert ovon(["dataset", "subset", str(tiny_dataset), "--size", "1", "--name", "one", "--split", "val_seen",
+                 "--out", str(one)]) == 0  # fmt: skip
     capsys.readouterr()
     for bad, says in (
         (["--subset", "nope"], "--subset 'nope': neither a subset file nor a named subset"),
         (["--protocol", "habitat"], "--protocol 'habitat' is not a protocol ovon knows (known: hm3d-ovon)"),
+        (["--protocol", "hm3d-ovon", "--preset", "paper"], "--preset paper with --protocol hm3d-ovon"),
+        (["--subset", str(one), "--splits", "val_unseen"], "subset 'one' holds splits ['val_seen'], not 'val_unseen'"),
     ):
         assert ovon(["evaluate", *common, *bad, "--out", str(tmp_path / "bad")]) == 2
         err = capsys.readouterr().err.strip()
         assert says in err and "\n" not in err
     assert ovon(["dataset", "verify", str(tiny_dataset), "--scenes", str(tiny_scenes)]) == 0
     assert "usable episodes" in capsys.readouterr().out
+    mini = ["dataset", "subset", str(tiny_dataset), "--size", "5", "--name", "mini", "--out", str(tmp_path / "m.json")]
+    assert ovon(mini) == 2 and "--name 'mini' is the named subset of 360" in capsys.readouterr().err
+
+
+def test_a_run_folder_of_path_keyed_records_is_refused_not_mixed(tiny_dataset, tiny_scenes, tmp_path, capsys):
+    """Records of an older ovon named scenes by their resolved path (and were seeded by it): continuing such a
+    folder would run every episode again beside the stale records."""
+    run = tmp_path / "old"
+    _evaluate(tiny_dataset, tiny_scenes, run)
+    lines = (run / "episodes.jsonl").read_text().splitlines()
+    old = [line.replace('"scene": "', f'"scene": "{tiny_scenes}/', 1) for line in lines]
+    (run / "episodes.jsonl").write_text("\n".join(old) + "\n")
+    capsys.readouterr()
+    args = ["evaluate", "--agent", "random", "--data", str(tiny_dataset), "--scenes", str(tiny_scenes)]
+    args += ["--splits", "val_seen", "--episodes", "5", "--seeds", "0", "--workers", "1", "--no-progress"]
+    assert ovon([*args, "--out", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert "its records name scenes by file path" in err and "fix: evaluate into a new --out folder" in err

@@ -21,7 +21,7 @@ def register(sub) -> None:
         "and a sign test",
     )
     p.add_argument("runs", nargs="+", help="run folders of `ovon evaluate`; the first is the baseline A")
-    p.add_argument("--resamples", type=int, help="bootstrap resamples (default 10000)")
+    p.add_argument("--resamples", help="bootstrap resamples (default 10000)")
     p.add_argument("--out", help="folder for compare.json and compare.md (default: print only)")
     p.set_defaults(func=cmd_compare)
 

@@ -30,6 +30,12 @@ NAMED: dict[str, int] = {"mini": 360}
 EpisodeRef = tuple[str, str]  # (scene id as in the episode file, episode id)
 
 
+def ids_sha256(ids: Iterable[tuple[str, str, str]]) -> str:
+    """The hash of an episode set, (split, scene id, episode id) in any order: what a subset file and a
+    protocol card cite, the same for the same episodes."""
+    return hashlib.sha256(json.dumps(sorted(map(list, ids))).encode()).hexdigest()
+
+
 def rank(split: str, scene_id: str, episode_id: str) -> str:
     return hashlib.sha256(f"{split}|{scene_id}|{episode_id}".encode()).hexdigest()
 
@@ -72,9 +78,7 @@ class Subset:
 
     @property
     def ids_sha256(self) -> str:
-        """The hash of the id lists: what a protocol card cites for the episode set."""
-        doc = {s: sorted(map(list, refs)) for s, refs in sorted(self.splits.items())}
-        return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+        return ids_sha256((split, scene, eid) for split, refs in self.splits.items() for scene, eid in refs)
 
     def to_json(self) -> dict:
         return {
@@ -90,8 +94,8 @@ def split_episodes(data: str | Path, split: str) -> list[tuple[str, str, str]]:
     """(scene id, episode id, goal category) of every valid episode of a split, as written in its files
     (invalid ones, which evaluation skips, are never chosen)."""
     ds = EpisodeDataset(data, split)
-    out = [(str(ep.scene_id), str(ep.episode_id), ep.object_category) for ep in ds.shell_episodes().episodes]
-    for _, shard in ds.iter_scenes():
+    out = []
+    for _, shard in ds.iter_scenes():  # the scene shards: what evaluation reads (`load_split`)
         good, _skipped = usable_episodes(shard)
         out += [(str(ep.scene_id), str(ep.episode_id), ep.object_category) for ep in good]
     return out
@@ -100,6 +104,11 @@ def split_episodes(data: str | Path, split: str) -> list[tuple[str, str, str]]:
 def make_subset(data: str | Path, size: int, name: str = "", splits: Iterable[str] = VAL_SPLITS) -> Subset:
     if size < 1:
         raise ValueError(f"--size {size}: expected a positive number of episodes per split; fix: e.g. --size 360")
+    if name in NAMED and size != NAMED[name]:
+        raise ValueError(
+            f"--name {name!r} is the named subset of {NAMED[name]} episodes per split, not {size}; fix: another "
+            f"--name, or --size {NAMED[name]}"
+        )
     chosen = {s: choose(s, split_episodes(data, s), size) for s in splits}
     return Subset(name or f"size{size}", size, chosen)
 
@@ -133,7 +142,12 @@ def read_subset(path: str | Path) -> Subset:
 
 def check_subset(subset: Subset, split: str, present: Iterable[EpisodeRef], where: str) -> set[EpisodeRef]:
     """The subset's ids of `split`; refuses ids the data does not hold (the subset was made from other data)."""
-    wanted = set(subset.splits.get(split, []))
+    if split not in subset.splits:
+        raise ValueError(
+            f"subset {subset.name!r} holds splits {sorted(subset.splits)}, not {split!r}; fix: --splits "
+            f"{','.join(sorted(subset.splits))}, or make the subset with `ovon dataset subset ... --split {split}`"
+        )
+    wanted = set(subset.splits[split])
     missing = wanted - set(present)
     if missing:
         scene, eid = sorted(missing)[0]
@@ -146,12 +160,13 @@ def check_subset(subset: Subset, split: str, present: Iterable[EpisodeRef], wher
 
 
 def load_subset(subset: str, data: str | Path, splits: Iterable[str]) -> Subset:
-    """`--subset`: a subset file, else a named subset computed from `data` by its rule."""
+    """`--subset`: a named subset computed from `data` by its rule, else a subset file (a file called like a
+    named subset is passed as ./NAME)."""
+    if subset in NAMED:
+        return named_subset(data, subset, splits)
     path = Path(subset)
     if path.is_file():
         return read_subset(path)
-    if subset in NAMED:
-        return named_subset(data, subset, splits)
     raise ValueError(
         f"--subset {subset!r}: neither a subset file nor a named subset (known: {', '.join(sorted(NAMED))}); fix: "
         "pass a file written by `ovon dataset subset DATA --size N --out FILE`, or a named subset"

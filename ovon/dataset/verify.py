@@ -75,7 +75,9 @@ def _split(rep: Verification, split: str, scenes: Path | None) -> None:
     shards = ds.scenes()
     if tops and not shell_eps and shards:
         rep.add(split, "note", "top-level file holds no episodes", f"the episodes are in {folder.name}/content/")
-    usable, skipped, missing = shell_eps, Counter(), set()
+    if shell_eps:
+        rep.add(split, "note", "episodes in the top-level file (not read)", f"{shell_eps}: evaluation reads content/")
+    usable, skipped, missing = 0, Counter(), set()
     for scene in shards:
         try:
             shard = read_shard(ds.shard_path(scene))

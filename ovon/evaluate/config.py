@@ -280,7 +280,21 @@ def eval_config(args: Any, notes: list[str] | None = None) -> EvalConfig:
     same one-line message as `--set`. What the user should be told (the camera taken from a checkpoint)
     is appended to `notes`."""
     if getattr(args, "task", "objectnav") == "pointnav":
+        for flag, value in (
+            ("--subset", getattr(args, "subset", None)),
+            ("--protocol", getattr(args, "protocol", None)),
+        ):
+            if value:
+                raise ConfigError(
+                    f"{flag} {value!r}: ObjectNav only (--task pointnav samples its episodes in --procedural "
+                    f"houses under its checkpoint's task); fix: drop {flag}"
+                )
         return _pointnav_eval_config(args)
+    if getattr(args, "protocol", None) and args.preset != "auto":
+        raise ConfigError(
+            f"--preset {args.preset} with --protocol {args.protocol}: the protocol sets the camera; fix: drop one of "
+            "them (--set sim.camera.* still changes the camera under a protocol, and the card says so)"
+        )
     cfg = from_dict(
         EvalConfig,
         {
@@ -303,6 +317,11 @@ def eval_config(args: Any, notes: list[str] | None = None) -> EvalConfig:
     camera = checkpoint_facts(str(checkpoint), "objectnav") if checkpoint else {}
     if getattr(args, "protocol", None):  # the named protocol's settings first; later options may change them
         cfg = dataclasses.replace(cfg, **protocol_config(args.protocol))
+        if camera and notes is not None:
+            notes.append(
+                f"--protocol {args.protocol}: the protocol's {cfg.sim.camera.width}x{cfg.sim.camera.height} camera, "
+                f"not the checkpoint's {camera.get('width')}x{camera.get('height')}"
+            )
     elif args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
     elif args.preset == "auto" and checkpoint:

@@ -25,7 +25,7 @@ from ovon.agents.remote import is_remote
 from ovon.atomic import atomic_write_text
 from ovon.config.base import ConfigError, to_dict, validate
 from ovon.dataset.episodes import SplitEpisodes, drop_off_map_starts, load_split
-from ovon.dataset.subset import load_subset, restrict_to_subset
+from ovon.dataset.subset import Subset, load_subset, restrict_to_subset
 from ovon.evaluate.config import POINTNAV_SPLIT, EvalConfig, check_episode_source
 from ovon.evaluate.protocol import agent_facts, card_line, episode_set, protocol_card
 from ovon.evaluate.results import (
@@ -80,6 +80,7 @@ class RunPlan:
     inputs: dict
     skipped: dict | None
     label: str  # progress bar title
+    card: dict | None = None  # the protocol card (ovon.evaluate.protocol), built before any episode runs
 
 
 def check_agent_of(cfg: EvalConfig) -> tuple[str, dict]:
@@ -121,14 +122,17 @@ def run_inputs(cfg: EvalConfig) -> dict:
     return inputs
 
 
-def prepare_splits(cfg: EvalConfig, workers: int | None = None) -> dict[str, SplitEpisodes]:
+def prepare_splits(
+    cfg: EvalConfig, workers: int | None = None, subset: Subset | None = None
+) -> dict[str, SplitEpisodes]:
     """The episodes of each split of an objectnav run (invalid ones and starts off the map skipped with one
     counted warning per split, or refused with `cfg.strict`); a split left without episodes is refused."""
     from ovon.dataset.records import DatasetError
     from ovon.dataset.validate import warn_skipped
 
     out = {}
-    subset = load_subset(cfg.subset, cfg.data, cfg.splits) if cfg.subset else None
+    if subset is None and cfg.subset:
+        subset = load_subset(cfg.subset, cfg.data, cfg.splits)
     for split in cfg.splits:
         if subset is None:
             sel = load_split(cfg.data, cfg.scenes, split, cfg.episodes, cfg.strict)
@@ -169,17 +173,35 @@ def plan(cfg: EvalConfig, workers: int | None = None) -> RunPlan:
     if cfg.task.kind == "pointnav":
         return _pointnav_plan(cfg)
     name, served = check_agent_of(cfg)
-    selected = prepare_splits(cfg, workers)
+    subset = load_subset(cfg.subset, cfg.data, cfg.splits) if cfg.subset else None
+    selected = prepare_splits(cfg, workers, subset)
     config = {k: v for k, v in to_dict(cfg).items() if k != "procedural"}  # identity as before pointnav joined
+    specs = {split: sel.specs for split, sel in selected.items()}
+    label = f"subset {subset.name}" if subset else ""
     return RunPlan(
-        {split: sel.specs for split, sel in selected.items()},
+        specs,
         name,
         config,
         {**config, **served},
         run_inputs(cfg),
         skip_counts(selected),
         f"evaluate {name}",
+        card_of(cfg, config, specs, label),
     )
+
+
+def card_of(cfg: EvalConfig, config: dict, specs: dict[str, list[EpisodeSpec]], subset: str) -> dict:
+    """The run's protocol card, from what the plan resolved (before any episode: nothing it reads can vanish)."""
+    if subset:
+        kind = subset + (f", its first {cfg.episodes} per split" if cfg.episodes is not None else "")
+    elif cfg.task.kind == "pointnav":
+        kind = f"{cfg.episodes} point goals per house of {cfg.procedural}"
+    elif cfg.episodes is not None:
+        kind = f"the first {cfg.episodes} per split (round-robin over scenes)"
+    else:
+        kind = "whole splits"
+    facts = agent_facts(cfg.agent, cfg.agent_kwargs, cfg.remote.allow_privileged)
+    return protocol_card(config, episode_set(specs, cfg.seeds, kind), facts)
 
 
 def _pointnav_plan(cfg: EvalConfig) -> RunPlan:
@@ -209,7 +231,8 @@ def _pointnav_plan(cfg: EvalConfig) -> RunPlan:
     fields = to_dict(cfg)
     config = {k: fields[k] for k in POINTNAV_KEYS}
     label = f"evaluate {name} (pointnav)"
-    return RunPlan({POINTNAV_SPLIT: specs}, name, config, {**config, **served}, inputs, None, label)
+    card = card_of(cfg, config, {POINTNAV_SPLIT: specs}, "")
+    return RunPlan({POINTNAV_SPLIT: specs}, name, config, {**config, **served}, inputs, None, label, card)
 
 
 def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dict:
@@ -223,7 +246,9 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
     run_dir = Path(run_dir)
     with RunFolder.open(run_dir, "evaluate", p.identity, p.inputs, may_change=MAY_CHANGE, markers=("episodes.jsonl",)):
         atomic_write_text(run_dir / "run.json", json.dumps({**p.config, "name": p.name}, indent=2))
-        done = {record_key(r) for r in read_records(run_dir, repair=True)}
+        records = read_records(run_dir, repair=True)
+        refuse_path_keyed_records(run_dir, records)
+        done = {record_key(r) for r in records}
         units = work_units(cfg, p.specs, done)
         total = sum(len(u.specs) for u in units)
         writer = RecordWriter(run_dir)
@@ -243,10 +268,18 @@ def evaluate(cfg: EvalConfig, run_dir: str | Path, progress: bool = True) -> dic
             for split, specs in p.specs.items()
             for s in specs
         }
-        subset = load_subset(cfg.subset, cfg.data, cfg.splits).name if cfg.subset else ""
-        episodes = episode_set(p.specs, cfg.seeds, subset, cfg.episodes)
-        card = protocol_card(p.config, episodes, agent_facts(cfg.agent, cfg.agent_kwargs, cfg.remote.allow_privileged))
-        return finalize(run_dir, p.name, wanted, p.skipped, card)
+        return finalize(run_dir, p.name, wanted, p.skipped, p.card)
+
+
+def refuse_path_keyed_records(run_dir: Path, records: list[dict]) -> None:
+    """Records written before seeds and records named a scene by the dataset's id (by its resolved path)
+    would neither count as done nor match the new seeds: such a folder cannot be continued."""
+    old = next((r["scene"] for r in records if Path(str(r["scene"])).is_absolute()), None)
+    if old is not None:
+        raise ConfigError(
+            f"{run_dir}: its records name scenes by file path (e.g. {old}), written by an older ovon whose "
+            "episode seeds depended on where the data lived; fix: evaluate into a new --out folder"
+        )
 
 
 def finalize(

@@ -15,6 +15,7 @@ import json
 from typing import Any
 
 import ovon
+from ovon.dataset.subset import ids_sha256
 
 # The authors' settings (arXiv 2409.14296 and the released task config): Stretch embodiment, a 360x640
 # portrait camera with 42 deg HFOV, 0.25 m / 30 deg actions, 500 steps, success = STOP within 0.25 m
@@ -40,6 +41,13 @@ NAMED: dict[str, dict[str, Any]] = {
 }
 
 
+SUCCESS_RULES = {
+    "objectnav": "STOP with the geodesic distance to the nearest goal viewpoint below success_distance; goals are "
+    "every instance of the category and of its child categories",
+    "pointnav": "STOP with the geodesic distance to the goal point below success_distance",
+}
+
+
 def _flat(card: dict, prefix: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in card.items():
@@ -54,13 +62,14 @@ def protocol_settings(config: dict) -> dict[str, Any]:
     """The protocol-relevant settings of a run config (`run.json`: an EvalConfig as a dict)."""
     sim, task = config.get("sim") or {}, config.get("task") or {}
     agent, cam, noise = sim.get("agent") or {}, sim.get("camera") or {}, sim.get("noise") or {}
+    actuation, odometry = noise.get("actuation", "none"), bool(noise.get("odometry", False))
+    kind = task.get("kind", "objectnav")
     return {
         "task": {
-            "kind": task.get("kind", "objectnav"),
+            "kind": kind,
             "max_steps": task.get("max_steps"),
             "success_distance": task.get("success_distance"),
-            "success_rule": "STOP with the geodesic distance to the nearest goal viewpoint below success_distance; "
-            "goals are every instance of the category and of its child categories",
+            "success_rule": SUCCESS_RULES.get(kind, ""),
         },
         "actions": {
             "move_forward_m": agent.get("forward_step"),
@@ -75,11 +84,11 @@ def protocol_settings(config: dict) -> dict[str, Any]:
             "height_m": cam.get("camera_height"),
         },
         "embodiment": {"radius_m": agent.get("radius"), "height_m": agent.get("height")},
-        "noise": {
-            "actuation": noise.get("actuation", "none"),
-            "actuation_multiplier": noise.get("actuation_multiplier", 1.0),
-            "odometry": bool(noise.get("odometry", False)),
-            "odometry_mode": noise.get("odometry_mode", "bounded"),
+        "noise": {  # a setting of a model that is off is not part of the protocol
+            "actuation": actuation,
+            "actuation_multiplier": noise.get("actuation_multiplier", 1.0) if actuation != "none" else None,
+            "odometry": odometry,
+            "odometry_mode": noise.get("odometry_mode", "bounded") if odometry else None,
         },
     }
 
@@ -99,7 +108,7 @@ def protocol_card(config: dict, episodes: dict, agent: dict) -> dict:
     diffs = {n: differences(settings, n) for n in NAMED}
     matched = [n for n, d in diffs.items() if not d]
     # What makes two results comparable: the rules and the episodes, not the agent or the seeds drawn.
-    same = {**settings, "episodes": {k: v for k, v in episodes.items() if k != "seeds"}}
+    same = {**settings, "episodes": {k: episodes.get(k) for k in ("splits", "ids_sha256")}}
     fingerprint = hashlib.sha256(json.dumps(same, sort_keys=True).encode()).hexdigest()[:12]
     return {
         "name": matched[0] if matched else "custom",
@@ -108,12 +117,6 @@ def protocol_card(config: dict, episodes: dict, agent: dict) -> dict:
         "ovon_version": ovon.__version__,
         "fingerprint": fingerprint,
     }
-
-
-def episode_ids_sha256(specs_by_split: dict[str, list]) -> str:
-    """Hash of the episode set (split, dataset scene id, episode id), independent of order and folders."""
-    ids = sorted((split, s.scene_key, s.episode_id) for split, specs in specs_by_split.items() for s in specs)
-    return hashlib.sha256(json.dumps(ids).encode()).hexdigest()
 
 
 def agent_facts(agent: str, kwargs: dict, remote_privileged: bool = False) -> dict:
@@ -147,18 +150,12 @@ def agent_facts(agent: str, kwargs: dict, remote_privileged: bool = False) -> di
     }
 
 
-def episode_set(specs_by_split: dict[str, list], seeds, subset: str, episodes: int | None) -> dict:
-    """The card's episode set: which episodes (by rule and by the hash of their ids) and the seeds."""
-    if subset:
-        kind = f"subset {subset}"
-    elif episodes is not None:
-        kind = f"the first {episodes} per split (round-robin over scenes)"
-    else:
-        kind = "whole splits"
+def episode_set(specs_by_split: dict[str, list], seeds, kind: str) -> dict:
+    """The card's episode set: which episodes (a description, and the hash of their ids) and the seeds."""
     return {
         "set": kind,
         "splits": {s: len(v) for s, v in sorted(specs_by_split.items())},
-        "ids_sha256": episode_ids_sha256(specs_by_split),
+        "ids_sha256": ids_sha256((split, s.scene_key, s.episode_id) for split, v in specs_by_split.items() for s in v),
         "seeds": sorted(int(s) for s in seeds),
     }
 

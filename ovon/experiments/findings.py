@@ -72,8 +72,9 @@ def paired_check(chk: Check, paired: Paired | None) -> dict | None:
         verdict = "does not hold"
     else:
         verdict = "not shown (an interval includes 0)"
+    sign = " (SR sign test p {p:.2g})" if chk.metric == "sr" else ""
     numbers = "; ".join(
-        f"{a} - {b} {st['diff']:+.1f} [{st['ci_low']:+.1f}, {st['ci_high']:+.1f}], sign test p {st['p']:.2g}"
+        f"{a} - {b} {st['diff']:+.1f} [{st['ci_low']:+.1f}, {st['ci_high']:+.1f}]" + sign.format(p=st["p"])
         for (a, b), st in zip(pairs, stats)
     )
     return {"verdict": verdict, "numbers": numbers}

@@ -17,6 +17,7 @@ import contextlib
 import json
 
 from ovon.config.base import to_dict
+from ovon.evaluate.harness import MAY_CHANGE as EVAL_MAY_CHANGE
 from ovon.experiments.cells import Cell, DataRun, EvalRun, Plan, TrainRun
 from ovon.experiments.tokens import tokenised_values
 from ovon.runfolder import IDENTITY_FILE, differences
@@ -47,7 +48,7 @@ MAY_CHANGE = {
         "bc.record_workers",
         *TRAIN_BUDGET,
     ),
-    "eval": ("data", "scenes", "splits", "seeds", "episodes", "workers", "executor", "name"),
+    "eval": EVAL_MAY_CHANGE,  # what the run folder itself lets change (one list)
     "data": (),
 }
 

@@ -11,11 +11,10 @@ search) is `ovon.maps.planner`.
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 
+from ovon.geometry import wrap_angle
 from ovon.sim.agent import TURN_LEFT, TURN_RIGHT
 
 
@@ -78,7 +77,7 @@ def nearest_path_index(pr: np.ndarray, pc: np.ndarray, lo: int, hi: int, r: int,
 
 def turn_action_to_yaw(yaw: float, want: float, tol_rad: float) -> int | None:
     """The turn that brings `yaw` toward `want`, or None when already within `tol`."""
-    err = (want - yaw + math.pi) % (2.0 * math.pi) - math.pi
+    err = wrap_angle(want - yaw)
     if abs(err) <= tol_rad:
         return None
     return TURN_LEFT if err > 0 else TURN_RIGHT

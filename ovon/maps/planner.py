@@ -17,6 +17,7 @@ import math
 import numba as nb
 import numpy as np
 
+from ovon.geometry import wrap_angle
 from ovon.sim.agent import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from ovon.sim.collision import forward_delta, free_prefix
 from ovon.sim.los import los_clear
@@ -42,7 +43,7 @@ def heading_error(position: np.ndarray, yaw: float, target_xz: tuple[float, floa
     if dx * dx + dz * dz < 1e-12:
         return 0.0
     want = math.atan2(-dx, -dz)
-    return (want - yaw + math.pi) % (2.0 * math.pi) - math.pi
+    return wrap_angle(want - yaw)
 
 
 def action_towards(err: float, threshold_rad: float) -> int:
@@ -203,10 +204,6 @@ def forward_free(
     return k == n
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
 class Steering:
     """Turns a desired heading error into an action that does not walk into walls.
 
@@ -274,14 +271,14 @@ class Steering:
             h = yaw + k * self.turn
             if not self.free(position, h):
                 continue
-            cost = abs(_wrap(h - want)) + 1e-3 * abs(k)
+            cost = abs(wrap_angle(h - want)) + 1e-3 * abs(k)
             if cost < best_cost:
                 best_cost = cost
                 best_k = k
         if best_k == 0:  # boxed in: keep turning one way
             self.commit_yaw = None
             return TURN_LEFT
-        self.commit_yaw = _wrap(yaw + best_k * self.turn)
+        self.commit_yaw = wrap_angle(yaw + best_k * self.turn)
         return TURN_LEFT if best_k > 0 else TURN_RIGHT
 
     def act(self, position: np.ndarray, yaw: float, err: float, last_action: int | None = None) -> int:
@@ -294,7 +291,7 @@ class Steering:
     def choose(self, position: np.ndarray, yaw: float, err: float) -> int:
         """Action for heading error `err`, between `observe` and `record`."""
         if self.commit_yaw is not None:
-            d = _wrap(self.commit_yaw - yaw)
+            d = wrap_angle(self.commit_yaw - yaw)
             if abs(d) < 0.5 * self.turn:
                 self.commit_yaw = None
                 if self.free(position, yaw):

@@ -37,8 +37,12 @@ def protocol_section(labels: list[str], cards: list[dict], mixed: bool) -> str:
     """The protocol every row ran under (`ovon.evaluate.protocol`): one line when they agree, else a warning
     and one line per row, so numbers of different protocols are never read as comparable."""
     lines = ["## Protocol", ""]
+    known = [c for c in cards if c.get("fingerprint")]
     if not mixed:
-        lines.append(card_line(cards[0]) if cards and cards[0] else "Protocol: not recorded (runs older than cards)")
+        lines.append(card_line(known[0]) if known else "Protocol: not recorded (runs older than protocol cards)")
+        if known and len(known) < len(cards):
+            lines.append("")
+            lines.append("Some runs have no protocol card (written before cards existed).")
     else:
         lines += [f"- {label}: {card_line(c) if c else 'not recorded'}" for label, c in zip(labels, cards)]
     return "\n".join(lines) + "\n"
@@ -58,7 +62,7 @@ def build_report(run_dirs: list[str | Path], out_dir: str | Path) -> Path:
         if seen[label] > 1:
             labels[i] = f"{label} ({Path(run_dirs[i]).name})"
     cards = [load_protocol(d) for d in run_dirs]
-    mixed = len({c.get("fingerprint") for c in cards}) > 1
+    mixed = len({c["fingerprint"] for c in cards if c.get("fingerprint")}) > 1  # runs without a card: not known
     runs = [(label, recs) for label, (_, recs) in zip(labels, loaded)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

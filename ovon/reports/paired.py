@@ -21,7 +21,7 @@ from scipy.stats import binomtest
 from ovon.evaluate.results import selected_records
 
 METRICS = ("sr", "spl")
-ALL = "all"
+ALL = "(all splits)"  # the pooled row: parentheses cannot be in a split name
 
 
 @dataclass(frozen=True)
@@ -117,10 +117,24 @@ def compare_pairs(
     return out
 
 
+def _read_json(path: Path) -> dict:
+    """A run's JSON file as a dict ({} when absent); a damaged one is one line naming it."""
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not readable JSON ({e}); fix: re-run `ovon evaluate` into that folder") from None
+    return doc if isinstance(doc, dict) else {}
+
+
 def run_name(run_dir: Path) -> str:
-    meta = run_dir / "run.json"
-    name = json.loads(meta.read_text()).get("name") if meta.is_file() else None
-    return str(name or run_dir.name)
+    return str(_read_json(run_dir / "run.json").get("name") or run_dir.name)
+
+
+def protocol_fingerprint(run_dir: Path) -> str | None:
+    card = _read_json(run_dir / "summary.json").get("protocol")
+    return card.get("fingerprint") if isinstance(card, dict) else None
 
 
 def compare_runs(run_dirs: list[str | Path], resamples: int = 10_000) -> dict:
@@ -132,14 +146,17 @@ def compare_runs(run_dirs: list[str | Path], resamples: int = 10_000) -> dict:
         if not (d / "episodes.jsonl").is_file():
             raise FileNotFoundError(f"{d} is not a run folder (no episodes.jsonl); fix: run `ovon evaluate --out {d}`")
     names = [run_name(d) for d in dirs]
+    prints = [protocol_fingerprint(d) for d in dirs]
     base = selected_records(dirs[0])
     comparisons = []
-    for d, name in zip(dirs[1:], names[1:]):
+    for d, name, fp in zip(dirs[1:], names[1:], prints[1:]):
         results = compare_pairs(pair_records(base, selected_records(d), names[0], name), resamples)
         comparisons.append(
             {
                 "a": names[0],
                 "b": name,
+                # the same episodes under other rules (noise, camera, steps) is a comparison of settings too
+                "same_protocol": None if fp is None or prints[0] is None else fp == prints[0],
                 "splits": [
                     {
                         **{k: v for k, v in asdict(r).items() if k != "stats"},
@@ -164,6 +181,12 @@ def paired_table(result: dict) -> str:
     ]
     pct = lambda x: f"{100 * x:.1f}"  # noqa: E731
     for comp in result["comparisons"]:
+        if comp.get("same_protocol") is False:
+            lines.insert(
+                1,
+                f"{comp['b']} ran under another protocol than {comp['a']} (summary.json `protocol`): "
+                "its difference mixes the agent with the settings.",
+            )
         for s in comp["splits"]:
             sr, spl = s["stats"]
             sign = s["sign"]
