@@ -6,6 +6,7 @@ resolved path of its file, so two labs evaluating one agent on one released data
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -96,7 +97,6 @@ def test_cards_subsets_and_reports_from_the_command_line(tiny_dataset, tiny_scen
     for bad, says in (
         (["--subset", "nope"], "--subset 'nope': neither a subset file nor a named subset"),
         (["--protocol", "habitat"], "--protocol 'habitat' is not a protocol ovon knows (known: hm3d-ovon)"),
-        (["--protocol", "hm3d-ovon", "--preset", "paper"], "--preset paper with --protocol hm3d-ovon"),
         (["--subset", str(one), "--splits", "val_unseen"], "subset 'one' holds splits ['val_seen'], not 'val_unseen'"),
     ):
         assert ovon(["evaluate", *common, *bad, "--out", str(tmp_path / "bad")]) == 2
@@ -122,3 +122,20 @@ def test_a_run_folder_of_path_keyed_records_is_refused_not_mixed(tiny_dataset, t
     assert ovon([*args, "--out", str(run)]) == 2
     err = capsys.readouterr().err
     assert "its records name scenes by file path" in err and "fix: evaluate into a new --out folder" in err
+
+
+def test_hm3d_episodes_default_to_the_authors_protocol(tmp_path, capsys):
+    from tests.test_evaluate import write_release_fixture
+
+    data, scenes = write_release_fixture(tmp_path)
+    args = ["evaluate", "--agent", "shortest-path", "--data", str(data), "--scenes", str(scenes)]
+    args += ["--splits", "val_seen", "--workers", "1", "--no-progress"]
+    assert ovon([*args, "--out", str(tmp_path / "auto")]) == 0
+    assert "protocol hm3d-ovon: the episodes name HM3D scenes" in capsys.readouterr().out
+    card = json.loads((tmp_path / "auto" / "summary.json").read_text())["protocol"]
+    assert card["name"] == "hm3d-ovon" and card["camera"]["width"] == 360 and card["task"]["max_steps"] == 500
+    assert ovon([*args, "--preset", "cpu", "--out", str(tmp_path / "cpu")]) == 0
+    card = json.loads((tmp_path / "cpu" / "summary.json").read_text())["protocol"]
+    assert card["name"] == "custom" and "camera.width 72 (hm3d-ovon: 360)" in card["differs_from"]["hm3d-ovon"]
+    assert ovon([*args, "--protocol", "none", "--out", str(tmp_path / "none")]) == 0
+    assert json.loads((tmp_path / "none" / "summary.json").read_text())["protocol"]["camera"]["width"] == 72

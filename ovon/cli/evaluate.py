@@ -89,8 +89,9 @@ def register(sub) -> None:
     p.add_argument(
         "--protocol",
         metavar="NAME",
-        help="start from a named protocol's settings (hm3d-ovon: the authors' camera, task and no noise); an "
-        "option that changes one makes the run's protocol card say custom",
+        help="start from a named protocol's settings: hm3d-ovon (the authors' camera, task, no noise), none (ovon's "
+        "CPU defaults) or auto (default: hm3d-ovon when the episodes name HM3D scenes, else none); an option that "
+        "changes a setting makes the run's protocol card say custom",
     )
     p.add_argument("--out", required=True, help="run folder (episodes.jsonl, summary.json, table.md)")
     p.add_argument("--no-progress", action="store_true")

@@ -269,9 +269,32 @@ def protocol_config(name: str) -> dict[str, Any]:
     if name not in NAMED:
         raise ConfigError(
             f"--protocol {name!r} is not a protocol ovon knows (known: {', '.join(sorted(NAMED))}); fix: name one "
-            "of them, or leave --protocol out and set each option yourself (the card then says custom)"
+            "of them, or --protocol none and set each option yourself (the card then says custom)"
         )
     return {"sim": SimConfig(), "task": TaskConfig()}
+
+
+def resolve_protocol(asked: str, cfg: EvalConfig) -> str:
+    """The named protocol a run starts from ("" for none): `auto` is hm3d-ovon when the episodes name HM3D
+    scenes (the released dataset's, and any generated for HM3D), so an HM3D number is the authors' unless an
+    option says otherwise; the embedded world's episodes keep ovon's CPU defaults."""
+    if asked == "none":
+        return ""
+    if asked != "auto":
+        protocol_config(asked)  # an unknown name is one line here
+        return asked
+    from ovon.dataset.io import EpisodeDataset
+
+    for split in cfg.splits:
+        try:
+            ds = EpisodeDataset(cfg.data, split)
+            scenes = ds.scenes()
+            episodes = ds.load_scene(scenes[0]).episodes if scenes else []
+        except (OSError, ValueError):  # a missing or broken split is refused, with its own line, by the run
+            continue
+        if episodes:
+            return "hm3d-ovon" if str(episodes[0].scene_id).startswith("hm3d/") else ""
+    return ""
 
 
 def eval_config(args: Any, notes: list[str] | None = None) -> EvalConfig:
@@ -279,22 +302,16 @@ def eval_config(args: Any, notes: list[str] | None = None) -> EvalConfig:
     (coercion + declared domains), so `--episodes -1`, `--seeds ''` or `--splits ''` are refused with the
     same one-line message as `--set`. What the user should be told (the camera taken from a checkpoint)
     is appended to `notes`."""
+    asked = getattr(args, "protocol", None) or "auto"
     if getattr(args, "task", "objectnav") == "pointnav":
-        for flag, value in (
-            ("--subset", getattr(args, "subset", None)),
-            ("--protocol", getattr(args, "protocol", None)),
-        ):
+        subset = getattr(args, "subset", None)
+        for flag, value in (("--subset", subset), ("--protocol", None if asked in ("auto", "none") else asked)):
             if value:
                 raise ConfigError(
                     f"{flag} {value!r}: ObjectNav only (--task pointnav samples its episodes in --procedural "
                     f"houses under its checkpoint's task); fix: drop {flag}"
                 )
         return _pointnav_eval_config(args)
-    if getattr(args, "protocol", None) and args.preset != "auto":
-        raise ConfigError(
-            f"--preset {args.preset} with --protocol {args.protocol}: the protocol sets the camera; fix: drop one of "
-            "them (--set sim.camera.* still changes the camera under a protocol, and the card says so)"
-        )
     cfg = from_dict(
         EvalConfig,
         {
@@ -315,23 +332,28 @@ def eval_config(args: Any, notes: list[str] | None = None) -> EvalConfig:
     )
     checkpoint = cfg.agent_kwargs.get("checkpoint") if args.agent in ("policy", "dagrl-od") else None
     camera = checkpoint_facts(str(checkpoint), "objectnav") if checkpoint else {}
-    if getattr(args, "protocol", None):  # the named protocol's settings first; later options may change them
-        cfg = dataclasses.replace(cfg, **protocol_config(args.protocol))
-        if camera and notes is not None:
-            notes.append(
-                f"--protocol {args.protocol}: the protocol's {cfg.sim.camera.width}x{cfg.sim.camera.height} camera, "
-                f"not the checkpoint's {camera.get('width')}x{camera.get('height')}"
+    say = notes.append if notes is not None else (lambda line: None)
+    protocol = resolve_protocol(asked, cfg)
+    if protocol:  # the protocol's settings first: the options below change them, and the card says so
+        cfg = dataclasses.replace(cfg, **protocol_config(protocol))
+        if asked == "auto":
+            say(
+                f"protocol {protocol}: the episodes name HM3D scenes, so the authors' settings apply (camera "
+                f"{cfg.sim.camera.width}x{cfg.sim.camera.height}, {cfg.task.max_steps} steps); --protocol none keeps "
+                "ovon's CPU defaults"
             )
-    elif args.preset == "paper":
+    if args.preset == "paper":
         cfg = dataclasses.replace(cfg, sim=SimConfig())
-    elif args.preset == "auto" and checkpoint:
-        if camera:
-            cfg = with_camera(cfg, camera)
-            if notes is not None:
-                notes.append(
-                    f"camera of the checkpoint: {camera.get('width')}x{camera.get('height')} "
-                    "(--preset cpu|paper overrides)"
-                )
+    elif args.preset == "cpu":
+        cfg = dataclasses.replace(cfg, sim=cpu_sim_config())
+    elif camera and protocol:
+        say(
+            f"protocol {protocol}: its {cfg.sim.camera.width}x{cfg.sim.camera.height} camera, not the checkpoint's "
+            f"{camera.get('width')}x{camera.get('height')} (--preset cpu or --set sim.camera.* change it)"
+        )
+    elif camera:
+        cfg = with_camera(cfg, camera)
+        say(f"camera of the checkpoint: {camera.get('width')}x{camera.get('height')} (--preset cpu|paper overrides)")
     cfg = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, noise=parse_noise(args.noise)))
     return validate(apply_overrides(cfg, args.set))
 
