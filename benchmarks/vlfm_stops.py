@@ -161,8 +161,8 @@ def replay_stops(run: Path) -> dict:
     from ovon.config.base import from_dict
     from ovon.config.sim import SimConfig
     from ovon.config.task import TaskConfig
-    from ovon.env import make_objectnav
     from ovon.dataset.episodes import load_specs
+    from ovon.env import make_objectnav
     from ovon.evaluate.runner import episode_info, episode_seed
 
     meta = json.loads((run / "run.json").read_text())
