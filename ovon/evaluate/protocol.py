@@ -16,6 +16,7 @@ from typing import Any
 
 import ovon
 from ovon.dataset.subset import ids_sha256
+from ovon.runfolder import flatten
 
 # The authors' settings (arXiv 2409.14296 and the released task config): Stretch embodiment, a 360x640
 # portrait camera with 42 deg HFOV, 0.25 m / 30 deg actions, 500 steps, success = STOP within 0.25 m
@@ -46,16 +47,6 @@ SUCCESS_RULES = {
     "every instance of the category and of its child categories",
     "pointnav": "STOP with the geodesic distance to the goal point below success_distance",
 }
-
-
-def _flat(card: dict, prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for k, v in card.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
 
 
 def protocol_settings(config: dict) -> dict[str, Any]:
@@ -95,7 +86,7 @@ def protocol_settings(config: dict) -> dict[str, Any]:
 
 def differences(settings: dict, name: str) -> list[str]:
     """What differs from the named protocol, e.g. "camera.width 72 (hm3d-ovon: 360)"."""
-    flat = _flat(settings)
+    flat = flatten(settings)
     return [f"{k} {flat.get(k)!r} ({name}: {v!r})" for k, v in NAMED[name].items() if flat.get(k) != v]
 
 

@@ -2,29 +2,18 @@
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
 from ovon.atomic import atomic_write_text, check_output_path
 from ovon.evaluate.protocol import card_line
-from ovon.reports.compare import load_meta, load_run, load_skipped, markdown_report
+from ovon.reports.compare import load_meta, load_protocol, load_run, load_skipped, markdown_report
 from ovon.reports.labels import run_label
 from ovon.reports.plots import plot_failures, plot_sr_per_category, plot_sr_vs_distance
 
 
 def _slug(s: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", s)
-
-
-def load_protocol(run_dir: str | Path) -> dict:
-    """The run's protocol card (summary.json), {} for a run written before cards existed."""
-    path = Path(run_dir) / "summary.json"
-    try:
-        card = json.loads(path.read_text()).get("protocol") if path.exists() else None
-    except (OSError, ValueError, AttributeError):
-        return {}
-    return card if isinstance(card, dict) else {}
 
 
 MIXED_WARNING = (

@@ -12,10 +12,30 @@ from ovon.reports.labels import agent_label, noise_label
 from ovon.task.tracker import FAILURE_LABELS
 
 
+def read_run_json(path: Path) -> dict:
+    """A run folder's JSON file as a dict ({} when absent); a damaged one is one line naming it."""
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not readable JSON ({e}); fix: re-run `ovon evaluate` into that folder") from None
+    return doc if isinstance(doc, dict) else {}
+
+
 def load_meta(run_dir: str | Path) -> dict:
     """The run's `run.json` (agent, agent_kwargs, sim incl. noise, name), {} when absent."""
-    meta = Path(run_dir) / "run.json"
-    return json.loads(meta.read_text()) if meta.exists() else {}
+    return read_run_json(Path(run_dir) / "run.json")
+
+
+def load_protocol(run_dir: str | Path) -> dict:
+    """The run's protocol card (summary.json), {} for a run written before cards existed or whose summary is
+    damaged (a report still renders; `finalize` rewrites the summary)."""
+    try:
+        card = read_run_json(Path(run_dir) / "summary.json").get("protocol")
+    except ValueError:
+        return {}
+    return card if isinstance(card, dict) else {}
 
 
 def load_run(run_dir: str | Path) -> tuple[str, list[dict]]:

@@ -9,7 +9,6 @@ seeds, the older rule, ignores that pairing and needs far larger gaps to call a 
 
 from __future__ import annotations
 
-import json
 import math
 from collections import defaultdict
 from dataclasses import asdict, dataclass
@@ -19,6 +18,7 @@ import numpy as np
 from scipy.stats import binomtest
 
 from ovon.evaluate.results import selected_records
+from ovon.reports.compare import load_meta, load_protocol
 
 METRICS = ("sr", "spl")
 ALL = "(all splits)"  # the pooled row: parentheses cannot be in a split name
@@ -117,26 +117,6 @@ def compare_pairs(
     return out
 
 
-def _read_json(path: Path) -> dict:
-    """A run's JSON file as a dict ({} when absent); a damaged one is one line naming it."""
-    if not path.is_file():
-        return {}
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not readable JSON ({e}); fix: re-run `ovon evaluate` into that folder") from None
-    return doc if isinstance(doc, dict) else {}
-
-
-def run_name(run_dir: Path) -> str:
-    return str(_read_json(run_dir / "run.json").get("name") or run_dir.name)
-
-
-def protocol_fingerprint(run_dir: Path) -> str | None:
-    card = _read_json(run_dir / "summary.json").get("protocol")
-    return card.get("fingerprint") if isinstance(card, dict) else None
-
-
 def compare_runs(run_dirs: list[str | Path], resamples: int = 10_000) -> dict:
     """The first run is the baseline A; each other run is B against it. JSON-ready."""
     dirs = [Path(d) for d in run_dirs]
@@ -145,8 +125,8 @@ def compare_runs(run_dirs: list[str | Path], resamples: int = 10_000) -> dict:
     for d in dirs:
         if not (d / "episodes.jsonl").is_file():
             raise FileNotFoundError(f"{d} is not a run folder (no episodes.jsonl); fix: run `ovon evaluate --out {d}`")
-    names = [run_name(d) for d in dirs]
-    prints = [protocol_fingerprint(d) for d in dirs]
+    names = [str(load_meta(d).get("name") or d.name) for d in dirs]
+    prints = [load_protocol(d).get("fingerprint") for d in dirs]
     base = selected_records(dirs[0])
     comparisons = []
     for d, name, fp in zip(dirs[1:], names[1:], prints[1:]):
