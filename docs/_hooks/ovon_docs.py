@@ -6,6 +6,7 @@
   `--set` takes, with its type, default, declared domain (`ovon.config.base`, the same words as the error
   messages) and the comment or docstring written beside the field.
 - `benchmarks/README.md` is the page `benchmarks.md`, as it is.
+- `<!-- ovon:looks -->` becomes the table of every shape family's looks (`ovon.scenes.procedural.looks`).
 - `<!-- ovon:results -->` becomes the list of the committed experiment reports; each
   `experiments/results/<name>/report.md` is added to the site as it is, with its figures, as
   `results/<name>/report.md`.
@@ -326,6 +327,7 @@ MARKERS = {
     "<!-- ovon:cli -->": cli_reference,
     "<!-- ovon:config -->": config_reference,
     "<!-- ovon:results -->": results_index,
+    "<!-- ovon:looks -->": lambda: looks_reference(),  # defined below
 }
 
 
@@ -344,6 +346,25 @@ def on_files(files, config, **kwargs):  # noqa: ANN001, ANN201 - MkDocs' hook si
     if benchmarks.is_file() and files.get_file_from_path("benchmarks.md") is None:
         files.append(File.generated(config, "benchmarks.md", abs_src_path=str(benchmarks)))
     return files
+
+
+def looks_reference() -> str:
+    """Every shape family with the look of each of its names (synonyms share one), from the generator."""
+    from ovon.scenes.procedural.looks import look_of
+    from ovon.scenes.vocabulary import load_vocabulary
+
+    vocab = load_vocabulary()
+    families: dict[str, list[str]] = {}
+    for name in vocab.names:
+        families.setdefault(vocab[name].family, []).append(name)
+    lines = ["| family | look | names |", "|---|---|---|"]
+    for family in sorted(families):
+        looks: dict[str, list[str]] = {}
+        for name in families[family]:
+            looks.setdefault(look_of(vocab[name], vocab).describe(), []).append(name)
+        for i, (look, names) in enumerate(sorted(looks.items(), key=lambda kv: kv[1][0])):
+            lines.append(f"| {family if i == 0 else ''} | {_cell(look)} | {_cell(', '.join(names))} |")
+    return "\n".join(lines)
 
 
 def on_page_markdown(markdown, page, config, files, **kwargs):  # noqa: ANN001, ANN201

@@ -15,15 +15,14 @@ import numpy as np
 
 from ovon.atomic import check_output_path
 from ovon.config.base import ConfigError, from_args, in_range
-
-# House seeds: seed * SEED_STRIDE + split base + index, so the default seed gives HM3D-like five-digit
-# scene ids (train 00000.., val 80000..) and different dataset seeds never share a house.
-SEED_STRIDE = 100_000
-SPLIT_BASE = {"train": 0, "val": 80_000}
-SPLIT_CAPACITY = {"train": 80_000, "val": 20_000}
-# `generate_house` takes 32-bit house seeds (it refuses larger ones): the last house of a dataset seed must fit
-MAX_HOUSE_SEED = 2**32 - 1
-MAX_DATASET_SEED = (MAX_HOUSE_SEED - (SEED_STRIDE - 1)) // SEED_STRIDE  # 42948: its last house still fits
+from ovon.scenes.procedural.seeds import (  # noqa: F401  (house_seed and the constants are re-exported)
+    MAX_DATASET_SEED,
+    MAX_HOUSE_SEED,
+    SEED_STRIDE,
+    SPLIT_BASE,
+    SPLIT_CAPACITY,
+    house_seed,
+)
 
 
 @dataclass(frozen=True)
@@ -48,23 +47,6 @@ def check_count(count: int, split: str) -> None:
             f"reuse the houses of another split or seed); expected an integer in [1, {cap}]; fix: pass "
             f"--count {cap} or less (and another --seed for more houses)"
         )
-
-
-def house_seed(seed: int, split: str, index: int) -> int:
-    """Seed of house `index` of `split`: deterministic from (seed, split, index); train and val differ,
-    and a larger --count keeps the earlier houses."""
-    if split not in SPLIT_BASE:
-        raise ValueError(f"unknown split {split!r}; valid: {sorted(SPLIT_BASE)}")
-    if not 0 <= index < SPLIT_CAPACITY[split]:
-        raise ValueError(
-            f"{split} holds at most {SPLIT_CAPACITY[split]} houses per seed, index {index} is out of range"
-        )
-    if not 0 <= seed <= MAX_DATASET_SEED:
-        raise ValueError(
-            f"--seed = {seed}: expected an integer in [0, {MAX_DATASET_SEED}] (house seeds are kept to "
-            "32 bits); fix: pass a smaller --seed"
-        )
-    return int(seed) * SEED_STRIDE + SPLIT_BASE[split] + int(index)
 
 
 def _done_seeds(split_dir: Path) -> dict[int, str]:

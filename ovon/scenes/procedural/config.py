@@ -81,3 +81,6 @@ class HouseConfig:
     canonical_label_prob: float = 0.5  # else one of the category's other raw labels
     bake_shading: bool = False  # darken faces by orientation (off: the renderers shade by normal already)
     cylinder_segments: int = 12
+    # "category": every category is dressed in its own look (looks.py: siblings of a shape family differ,
+    # synonyms match); "family": the looks before issue 37 (siblings differ only in colour and size)
+    looks: str = "category"

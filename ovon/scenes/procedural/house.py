@@ -15,6 +15,8 @@ Algorithm:
    `is_surface` tops, and ceiling objects hanging above head height.
 3. Mesh (shapes.py): one builder per shape family; parts are transformed and concatenated once, with
    per-face colour (category colour x part shade; orientation shading only if `bake_shading`) and per-face instance id.
+4. Looks (looks.py, `looks="category"`): each category's faces are split along its pattern's planes and
+   two-toned (base colour / accent), so siblings of a family look different and synonyms alike.
 
 Instance ids: structural parts come first (walls, floors, ceilings: raw labels "wall", "floor",
 "ceiling", category None), then objects; ids start at 1 and are contiguous.
@@ -31,6 +33,7 @@ from ..vocabulary import Vocabulary, load_vocabulary
 from .config import HouseConfig
 from .furnish import Furnisher, rotation
 from .layout import make_layout
+from .looks import apply_look, look_of
 from .shapes import box_mesh, build_shape
 
 _ALNUM = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
@@ -122,9 +125,13 @@ def generate_house(seed: int, vocab: Vocabulary | None = None, cfg: HouseConfig 
     for p in placed:
         iid = len(objects) + 1
         pm = build_shape(p.category.family, p.size, cfg.cylinder_segments)
+        if cfg.looks == "category":
+            local, f, col = apply_look(pm.vertices, pm.faces, pm.shade, p.size, p.color, look_of(p.category, vocab))
+        else:
+            local, f, col = pm.vertices, pm.faces, p.color[None, :] * pm.shade[:, None]
         R = rotation(p.yaw)
-        v = pm.vertices @ R.T + p.pos
-        add(v, pm.faces, p.color[None, :] * pm.shade[:, None], iid)
+        v = local @ R.T + p.pos
+        add(v, f, col, iid)
         half = np.array(p.size) / 2
         objects.append(
             ObjectInstance(
