@@ -17,7 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 CONTRACT = (
     "atomic | config | geometry | lru | parallel | plugins -> runfolder -> scenes -> sim -> maps -> "
-    "experts | models | task -> dataset | env -> agents -> evaluate | train -> reports -> experiments -> cli"
+    "experts | models | task -> dataset | env -> agents -> evaluate | train | perception -> reports -> "
+    "experiments -> cli"
 )
 
 # Declared edges against the line (importer module -> imported module), each with its reason. A declared

@@ -18,7 +18,7 @@ import sys
 import warnings
 from pathlib import Path
 
-GROUPS = ["scenes", "sim", "dataset", "evaluate", "compare", "serve", "train", "demo", "experiment"]
+GROUPS = ["scenes", "sim", "dataset", "evaluate", "compare", "serve", "train", "perception", "demo", "experiment"]
 
 
 class OneLineParser(argparse.ArgumentParser):

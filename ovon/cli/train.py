@@ -31,9 +31,10 @@ def register(sub) -> None:
     p.add_argument("--policy", choices=["transformer", "lstm"], default=None, help="policy core (default: preset)")
     p.add_argument(
         "--encoder",
-        choices=["oracle-vl", "siglip", "cnn", "depth-grid"],
+        choices=["oracle-vl", "world-vl", "siglip", "cnn", "depth-grid"],
         default=None,
-        help="image encoder (default: preset; oracle-vl is ORACLE PERCEPTION)",
+        help="image encoder (default: preset; oracle-vl is ORACLE PERCEPTION; world-vl is ovon's pretrained "
+        "encoder from RGB, shipped weights or encoder.world_checkpoint=PATH)",
     )
     p.add_argument(
         "--expert",
@@ -77,13 +78,9 @@ def check_args(args) -> TrainArgs:
     """The options checked before any work: the declared domains, a `--config` naming a folder, and an
     `--out` that cannot be a run folder (empty, an existing file, under a file)."""
     from ovon.atomic import check_output_path
-    from ovon.config.base import ConfigError, from_args
+    from ovon.config.base import check_config_file, from_args
 
-    if args.config and Path(args.config).is_dir():
-        raise ConfigError(
-            f"--config {args.config!r} is a folder, not a YAML file; fix: pass the path of a YAML "
-            "file of TrainConfig keys"
-        )
+    check_config_file(args.config, "TrainConfig")
     a = from_args(TrainArgs, args)
     check_output_path(args.out, "--out", folder=True)
     return a

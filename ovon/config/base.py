@@ -839,6 +839,14 @@ def load_yaml(path: str | Path) -> dict[str, Any]:
     return data
 
 
+def check_config_file(path: str | None, keys: str) -> None:
+    """`--config` names a folder: one line before any work (reading it would fail with an OS error)."""
+    if path and Path(path).is_dir():
+        raise ConfigError(
+            f"--config {path!r} is a folder, not a YAML file; fix: pass the path of a YAML file of {keys} keys"
+        )
+
+
 def build(
     cls: type[T],
     preset: T | None = None,

@@ -7,6 +7,7 @@ CNN cannot run there: with `encoder.image == "cnn"` the frames pass through for 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -21,6 +22,30 @@ from ovon.models.encoders import TableTextEncoder, encode_observation, make_imag
 IMAGE, GOAL = "image", "goal_emb"
 
 
+@dataclass
+class PendingImage:
+    """An image embedding not computed yet: a vector env worker encodes the frames of all its envs in one
+    batch (`resolve_pending`) instead of one forward pass per env."""
+
+    encoder: Any
+    inputs: dict[str, Any]
+
+
+def resolve_pending(observations: list[dict]) -> None:
+    """Replace every `PendingImage` by its embedding, one `encode` call per group of equivalent encoders."""
+    groups: dict[Any, list[dict]] = {}
+    for obs in observations:
+        pending = obs.get(IMAGE)
+        if isinstance(pending, PendingImage):
+            groups.setdefault(pending.encoder.batch_key, []).append(obs)
+    for members in groups.values():
+        first = members[0][IMAGE]
+        batch = {k: np.stack([m[IMAGE].inputs[k] for m in members]) for k in first.inputs}
+        emb = first.encoder.encode(batch).numpy()
+        for obs, e in zip(members, emb):
+            obs[IMAGE] = e
+
+
 class EncodeObservation(gym.Wrapper):
     """Replaces the observation by {"image" (D,) | "rgb"/"depth" (cnn), "goal_emb" (Dg,), "collided"
     [, "expert_action"]}. The oracle encoder (ORACLE PERCEPTION) reads the semantic frame from
@@ -33,6 +58,8 @@ class EncodeObservation(gym.Wrapper):
         self.text = TableTextEncoder(text_table, encoder)
         self.image_encoder = None if encoder.image == "cnn" else make_image_encoder(encoder, self.text)
         self.oracle = encoder.image == "oracle-vl"
+        # set by a vector env worker that batches encoders with a `batch_key` (see `resolve_pending`)
+        self.defer_encoding = False
         inner = env.observation_space.spaces
         # PointNav: the goal input is the goal vector the env computes from odometry, not a text embedding.
         self.point = "pointgoal" in inner
@@ -60,6 +87,9 @@ class EncodeObservation(gym.Wrapper):
             semantic = p.frame.semantic
         if self.image_encoder is None:
             out.update({k: obs[k] for k in ("rgb", "depth") if k in obs})
+        elif self.defer_encoding and hasattr(self.image_encoder, "batch_key"):
+            inputs = {"rgb": np.asarray(obs["rgb"]), "depth": np.asarray(obs["depth"])}
+            out[IMAGE] = PendingImage(self.image_encoder, inputs | {"collided": int(obs.get("collided", 0))})
         else:
             out[IMAGE] = encode_observation(self.image_encoder, obs, semantic)
         if self.point:
@@ -83,4 +113,4 @@ class EncodeObservation(gym.Wrapper):
         return self._encode(obs, info), reward, terminated, truncated, info
 
 
-__all__ = ["EncodeObservation", "GOAL", "IMAGE", "PRIVILEGED"]
+__all__ = ["EncodeObservation", "GOAL", "IMAGE", "PRIVILEGED", "PendingImage", "resolve_pending"]

@@ -95,6 +95,17 @@ class _Host:
         self.first = first
         self.buffers = buffers
         self.texts: list[str | None] = [None] * len(self.envs)
+        # envs whose encoder batches (world-vl) hand back pending embeddings, encoded together per step
+        for env in self.envs:
+            if env.has_wrapper_attr("defer_encoding"):
+                env.set_wrapper_attr("defer_encoding", True)
+
+    def _write_all(self, observations: list[dict], changed: dict[int, dict[str, str]]) -> None:
+        from ovon.env.encode import resolve_pending
+
+        resolve_pending(observations)
+        for j, obs in enumerate(observations):
+            self._write(j, obs, changed)
 
     def _write(self, j: int, obs: dict, changed: dict[int, dict[str, str]]) -> None:
         row = self.first + j
@@ -107,12 +118,13 @@ class _Host:
                     changed.setdefault(row, {})[k] = v
 
     def reset(self, seeds: Sequence[int | None], options: dict | None) -> tuple[list, dict]:
-        infos, changed = [], {}
+        infos, changed, observations = [], {}, []
         self.texts = [None] * len(self.envs)
-        for j, (env, seed) in enumerate(zip(self.envs, seeds)):
+        for env, seed in zip(self.envs, seeds):
             obs, info = env.reset(seed=seed, options=options)
-            self._write(j, obs, changed)
+            observations.append(obs)
             infos.append(_clean_info(info) or None)
+        self._write_all(observations, changed)
         return infos, changed
 
     def step(self, actions: Sequence[Any]) -> tuple:
@@ -122,6 +134,7 @@ class _Host:
         truncs = np.zeros(n, np.bool_)
         infos: list[dict | None] = [None] * n
         changed: dict[int, dict[str, str]] = {}
+        observations = []
         for j, (env, a) in enumerate(zip(self.envs, actions)):
             obs, r, term, trunc, info = env.step(a)
             rewards[j], terms[j], truncs[j] = r, term, trunc
@@ -131,7 +144,8 @@ class _Host:
                 info = {**info, "final_info": final}
             info = _clean_info(info)
             infos[j] = info or None
-            self._write(j, obs, changed)
+            observations.append(obs)
+        self._write_all(observations, changed)
         return rewards, terms, truncs, infos, changed
 
     def call(self, name: str, args: Sequence[tuple]) -> list:
@@ -150,12 +164,13 @@ class _Host:
 
     def call_obs(self, name: str, args: Sequence[tuple]) -> tuple[list, dict]:
         """Call a method returning (obs, info) on every env and publish the observations."""
-        infos, changed = [], {}
+        infos, changed, observations = [], {}, []
         self.texts = [None] * len(self.envs)
-        for j, (env, a) in enumerate(zip(self.envs, args)):
+        for env, a in zip(self.envs, args):
             obs, info = getattr(env, name)(*a)
-            self._write(j, obs, changed)
+            observations.append(obs)
             infos.append(_clean_info(info) or None)
+        self._write_all(observations, changed)
         return infos, changed
 
     def close(self) -> None:

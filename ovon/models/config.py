@@ -24,7 +24,7 @@ from ovon.config.base import (
     rule,
 )
 
-ImageEncoderName = Literal["oracle-vl", "siglip", "cnn", "depth-grid"]
+ImageEncoderName = Literal["oracle-vl", "world-vl", "siglip", "cnn", "depth-grid"]
 TextEncoderName = Literal["minilm-text", "siglip-text"]
 DEFAULT_SIGLIP = "google/siglip-base-patch16-256"
 DEFAULT_OWLV2 = "google/owlv2-base-patch16-ensemble"
@@ -44,6 +44,13 @@ class EncoderConfig:
 
     image: ImageEncoderName = "oracle-vl"
     text: TextEncoderName = "minilm-text"
+    # world-vl (ovon's pretrained encoder, learned perception): "" = the weights shipped in the package, or a
+    # world_vl.safetensors / `ovon perception pretrain` run folder. It fills the oracle-vl layout: the
+    # oracle_grid, oracle_global, oracle_depth_grid and oracle_collision fields below apply to it too.
+    world_checkpoint: str = ""
+    # world-vl frames per forward pass: every frame is computed in a batch of exactly this size (padded), so
+    # its embedding does not depend on which frames share the batch (vector env workers batch their envs)
+    world_batch: int = in_range(4, 1, 256)
     # SigLIP: a hub id found in the local HF cache, or a folder written by `save_pretrained`.
     siglip_model: str = non_empty(DEFAULT_SIGLIP)
     siglip_normalize: bool = True  # L2-normalise SigLIP embeddings (cosine-ready)
@@ -143,6 +150,10 @@ class DetectorConfig:
     owlv2_threshold: float = in_range(0.3, 0, 1)  # keep boxes scoring above this
     owlv2_prompt: str = constrained("a photo of a {goal}", GOAL_PROMPT)
     device: str = "cpu"
+    # world-owl (ovon's pretrained detector): "" = the shipped weights, or a world_vl.safetensors / run folder;
+    # world_threshold < 0 keeps the threshold calibrated on the pretraining houses
+    checkpoint: str = ""
+    world_threshold: float = in_range(-1.0, -1.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -157,11 +168,12 @@ class ScorerConfig:
     oracle_noise_std: float = non_negative(0.0)  # oracle-vl noise (see OracleVLEncoder)
     oracle_dropout: float = in_range(0.0, 0, 1)
     device: str = "cpu"
+    checkpoint: str = ""  # world-vl: "" = the shipped weights, or a world_vl.safetensors / run folder
 
 
 def text_aligned_parts(cfg: EncoderConfig) -> int:
     """How many goal-text-space vectors (each `text_dim` long) open the image embedding."""
-    if cfg.image == "oracle-vl":
+    if cfg.image in ("oracle-vl", "world-vl"):
         return cfg.oracle_grid * cfg.oracle_grid + (1 if cfg.oracle_global else 0)
     if cfg.image == "siglip":
         return 1

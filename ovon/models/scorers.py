@@ -6,6 +6,8 @@ Protocol: `score(observation, goal_text) -> float` (a cosine for the built-ins),
   frame through the privileged channel) and the goal text, in MiniLM space;
 * "siglip": cosine between the frozen SigLIP image and text embeddings (the existing encoders, local
   Hugging Face cache only), the open replacement for VLFM's BLIP-2 ITC score;
+* "world-vl": ovon's pretrained image-text match (learned perception from RGB, weights shipped):
+  `ovon.models.world.roles.WorldVLScorer`;
 * "constant": 1 for every frame (frontier choice falls back to the nearest frontier: plain frontier
   exploration, an ablation);
 * "package.module:Class": your own, constructed with the `ScorerConfig` (`ovon.models.config`).
@@ -25,6 +27,7 @@ BUILTIN: dict[str, str] = {
     "oracle-vl": "ovon.models.scorers:OracleVLScorer",
     "siglip": "ovon.models.scorers:SiglipScorer",
     "constant": "ovon.models.scorers:ConstantScorer",
+    "world-vl": "ovon.models.world.roles:WorldVLScorer",
 }
 SCORERS = tuple(BUILTIN)
 
@@ -136,6 +139,11 @@ def make_scorer(cfg: ScorerConfig | None = None, text_encoder=None) -> ImageText
 
 
 def describe_scorer(cfg: ScorerConfig) -> str:
-    return {"oracle-vl": "oracle-vl value", "siglip": "SigLIP value", "constant": "no value"}.get(
+    return {
+        "oracle-vl": "oracle-vl value",
+        "siglip": "SigLIP value",
+        "constant": "no value",
+        "world-vl": "world-vl value",
+    }.get(  # fmt: skip
         cfg.kind, f"{cfg.kind} value"
     )

