@@ -62,7 +62,9 @@ def test_one_dispatch_for_built_ins_and_plug_ins() -> None:
         for name, spec in table.items():
             assert lookup(name, table) == spec and inspect.isclass(load_object(spec)), spec
     assert lookup("json:JSONDecoder", DETECTORS) == "json:JSONDecoder" and lookup("nope", DETECTORS) is None
-    with pytest.raises(PluginError, match=r"^detector.kind = 'yolo' is unknown; use one of \['oracle', 'owlv2'\]"):
+    with pytest.raises(
+        PluginError, match=r"^detector.kind = 'yolo' is unknown; use one of \['oracle', 'owlv2', 'world-owl'\]"
+    ):
         load_named("yolo", DETECTORS, "detector.kind")
 
 
@@ -72,7 +74,9 @@ def test_factories_refuse_an_unknown_name_in_one_line(factory: str) -> None:
         from ovon.models.config import DetectorConfig
         from ovon.models.detectors import make_detector
 
-        with pytest.raises(PluginError, match=r"^detector.kind = 'nope' is unknown; use one of \['oracle', 'owlv2'\]"):
+        with pytest.raises(
+            PluginError, match=r"^detector.kind = 'nope' is unknown; use one of \['oracle', 'owlv2', 'world-owl'\]"
+        ):
             make_detector(DetectorConfig(kind="nope"))
     elif factory == "scorer":
         from ovon.models.config import ScorerConfig
