@@ -162,7 +162,7 @@ class Each(Domain):
 class ExistingPath(Domain):
     """A path that exists (a file or a folder); `optional`: "" (or None) means "not given"."""
 
-    kind: str = "file"  # file | dir
+    kind: str = "file"  # file | dir | any (a file or a folder)
     optional: bool = False
     empty: str = "for none"  # what an empty value means, for messages (e.g. "with --task pointnav")
 
@@ -170,12 +170,14 @@ class ExistingPath(Domain):
         if value in ("", None):
             return self.optional
         p = Path(str(value)).expanduser()
+        if self.kind == "any":
+            return p.exists()
         return p.is_file() if self.kind == "file" else p.is_dir()
 
     def describe(self, noun: str) -> str:
         if noun == "strings":  # an element of a list
             return "existing files" if self.kind == "file" else "existing folders"
-        what = "an existing file" if self.kind == "file" else "an existing folder"
+        what = {"file": "an existing file", "dir": "an existing folder"}.get(self.kind, "an existing file or folder")
         return what + (f" (or empty {self.empty})" if self.optional else "")
 
 

@@ -13,6 +13,7 @@ from typing import ClassVar, Literal
 
 from ovon.config.base import (
     Each,
+    ExistingPath,
     Pattern,
     Positive,
     Range,
@@ -32,6 +33,10 @@ DEFAULT_OWLV2 = "google/owlv2-base-patch16-ensemble"
 GOAL_PROMPT = Pattern(r"(?s).*\{goal\}.*", "a string containing {goal}")
 
 
+# world-vl weights: a world_vl.safetensors or the `ovon perception pretrain` run folder holding one; "" = shipped
+WORLD_WEIGHTS = ExistingPath("any", optional=True, empty="for the weights shipped in the package")
+
+
 @dataclass(frozen=True)
 class EncoderConfig:
     """Perception encoders.
@@ -47,7 +52,7 @@ class EncoderConfig:
     # world-vl (ovon's pretrained encoder, learned perception): "" = the weights shipped in the package, or a
     # world_vl.safetensors / `ovon perception pretrain` run folder. It fills the oracle-vl layout: the
     # oracle_grid, oracle_global, oracle_depth_grid and oracle_collision fields below apply to it too.
-    world_checkpoint: str = ""
+    world_checkpoint: str = constrained("", WORLD_WEIGHTS)
     # world-vl frames per forward pass: every frame is computed in a batch of exactly this size (padded), so
     # its embedding does not depend on which frames share the batch (vector env workers batch their envs)
     world_batch: int = in_range(4, 1, 256)
@@ -152,7 +157,7 @@ class DetectorConfig:
     device: str = "cpu"
     # world-owl (ovon's pretrained detector): "" = the shipped weights, or a world_vl.safetensors / run folder;
     # world_threshold < 0 keeps the threshold calibrated on the pretraining houses
-    checkpoint: str = ""
+    checkpoint: str = constrained("", WORLD_WEIGHTS)
     world_threshold: float = in_range(-1.0, -1.0, 1.0)
 
 
@@ -168,7 +173,7 @@ class ScorerConfig:
     oracle_noise_std: float = non_negative(0.0)  # oracle-vl noise (see OracleVLEncoder)
     oracle_dropout: float = in_range(0.0, 0, 1)
     device: str = "cpu"
-    checkpoint: str = ""  # world-vl: "" = the shipped weights, or a world_vl.safetensors / run folder
+    checkpoint: str = constrained("", WORLD_WEIGHTS)  # world-vl: "" = the shipped weights, or a file / run folder
 
 
 def text_aligned_parts(cfg: EncoderConfig) -> int:
