@@ -7,8 +7,8 @@ One forward pass gives what the three perception roles read:
 Scores are SigLIP's: sigmoid(scale * cosine + bias), one independent probability per name, so sibling
 names do not compete for probability mass as they do under a softmax.
 
-Why this size: a small FPN (about 0.4 M parameters) runs in about a millisecond per frame on one CPU core
-at the 72 x 128 camera, batched, so perception does not dominate an env step.
+Why this size: a small FPN (about 0.64 M parameters) runs in about 1.5-2 ms per frame on one CPU core at the
+72 x 128 camera, batched (benchmarks/perception_speed.py), so perception does not dominate an env step.
 """
 
 from __future__ import annotations
@@ -98,7 +98,7 @@ class WorldVLNet(nn.Module):
     def cell_cosines(self, top: torch.Tensor, text: torch.Tensor) -> torch.Tensor:
         """Cosine of every cell embedding with unit texts (K, D) -> (B, K, h, w), without building the
         (B, D, h, w) embeddings: the projection is linear, so project the texts and take the norms from
-        the head's Gram matrix (D = 384 against C = 64 channels: about 6x fewer operations)."""
+        the head's Gram matrix (D = 384 against C = 48 channels: about 8x fewer operations)."""
         W = self.cell_head.weight[:, :, 0, 0]  # (D, C)
         b = self.cell_head.bias  # (D,)
         tw = text @ W  # (K, C)

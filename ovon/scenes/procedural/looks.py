@@ -63,12 +63,15 @@ def synonym_groups() -> tuple[tuple[str, ...], ...]:
     return tuple(tuple(g) for g in yaml.safe_load(text)["synonyms"])
 
 
+@lru_cache(maxsize=1)
+def _group_heads() -> dict[str, str]:
+    return {name: group[0] for group in synonym_groups() for name in group}
+
+
 def look_key(name: str) -> str:
-    """The name whose look `name` shares (its synonym group's first name; itself when it has none)."""
-    for group in synonym_groups():
-        if name in group:
-            return group[0]
-    return name
+    """The name whose look `name` shares (its synonym group's first name; itself when it has none). A dict
+    lookup: labelling frames calls this once per visible instance."""
+    return _group_heads().get(name, name)
 
 
 def _axes(cat: Category) -> tuple[int, int]:
