@@ -56,7 +56,13 @@ def test_every_definition_resolves_at_every_scale(scale: str, tmp_path: Path) ->
     trains = {c.name: c for c in plan.cells.values() if c.kind == "train"}
     evals = {c.name: c for c in plan.cells.values() if c.kind == "eval"}
     # RL from scratch is two cells (rl-warmup, rl) below paper scale
-    assert len(trains) == (14 if scale == "paper" else 16) and len(evals) == 20
+    assert len(trains) == (16 if scale == "paper" else 18) and len(evals) == 22
+    if scale == "cpu":  # learned perception everywhere but the rows named as the oracle upper bound
+        assert {c.train_cfg.encoder.image for c in trains.values()} == {"world-vl"}
+        for name, cell in evals.items():
+            args = " ".join(cell.commands[0])
+            learned = "detector.kind=world-owl" in args
+            assert learned == (cell.eval_cell.agent != "policy" and "oracle" not in name), name
     recipes = load_catalogue().recipes
     for name, cell in trains.items():
         assert isinstance(cell.train_cfg, TrainConfig), name
@@ -82,7 +88,7 @@ def test_every_definition_resolves_at_every_scale(scale: str, tmp_path: Path) ->
         assert "--executor" in evals["dagrl"].commands[0] and "ray" in evals["dagrl"].commands[0]
     else:
         assert trains["dagger"].launcher == ()
-        assert trains["dagger"].train_cfg.encoder.image == "oracle-vl"
+        assert trains["dagger"].train_cfg.encoder.image == ("oracle-vl" if scale == "tiny" else "world-vl")
     # VLFM sees the camera the policies were trained with (an override, or the default when they match it)
     from ovon.config.sim import cpu_sim_config
 
@@ -98,8 +104,8 @@ def test_cells_shared_between_experiments_are_one_run_folder(tmp_path: Path) -> 
     for cid in ("train:dagger", "train:dagrl", "eval:dagrl"):
         assert main.cells[cid].commands == memory.cells[cid].commands == both.cells[cid].commands
         assert main.cells[cid].folder == memory.cells[cid].folder
-    # 5 transformer + 5 LSTM, once each, RL from scratch in two phases
-    assert len([c for c in both.cells if c.startswith("train:")]) == 12
+    # 5 transformer + 5 LSTM, once each, RL from scratch in two phases, DAgger and DAgRL from a second seed
+    assert len([c for c in both.cells if c.startswith("train:")]) == 14
 
 
 def test_every_table_entry_has_the_papers_numbers_and_they_satisfy_its_findings() -> None:
@@ -113,12 +119,13 @@ def test_every_table_entry_has_the_papers_numbers_and_they_satisfy_its_findings(
         res = experiment_results(exp, evals)
         for row in res.get("table", {}).get("rows", []):
             for entry in row["cells"].values():
-                assert entry["paper"] is not None and entry["ours"] is None
+                # only our upper-bound rows have no paper numbers
+                assert (entry["paper"] is None) == ("upper bound" in row["name"]) and entry["ours"] is None
         for f in res["findings"]:
             assert f["paper"]["verdict"] == "holds", (exp.name, f["id"], f["paper"])
             assert f["ours"]["verdict"] == "not run"
     ids = sorted(f.id for e in all_experiments() for f in e.findings)
-    assert ids == ["a", "b", "c", "d", "e", "f"]
+    assert ids == ["a", "b", "c", "d", "e", "f", "g"]
 
 
 def test_main_table_numbers_are_the_papers() -> None:
@@ -210,9 +217,15 @@ def test_missing_paper_numbers_and_bad_references_are_refused(tmp_path: Path) ->
     base = (
         "title: t\ntable: {caption: c, columns: [{name: v, split: val_seen}], rows: [{name: DAgRL, eval: dagrl%s}]}\n"
     )
-    with pytest.raises(DefinitionError, match="no paper numbers"):
-        resolve([load_experiment(str(_write(tmp_path / "a.yaml", base % "")))], "cpu", tmp_path)
+    two = base.replace("{name: v, split: val_seen}", "{name: v, split: val_seen}, {name: w, split: val_unseen}")
+    with pytest.raises(DefinitionError, match="no paper numbers for column 'w'"):  # partial numbers: a typo
+        partial = two % ", paper: {v: [1, 1, 1, 1]}"
+        resolve([load_experiment(str(_write(tmp_path / "a.yaml", partial)))], "cpu", tmp_path)
+    resolve([load_experiment(str(_write(tmp_path / "c.yaml", base % "")))], "cpu", tmp_path)  # none: ours only
     ok = base % ", paper: {v: [1, null, 1, null]}"
+    margin = ok + "findings: [{id: z, claim: c, checks: [{kind: drop, margin: 5, pairs: [[DAgRL @ v, DAgRL @ v]]}]}]\n"
+    with pytest.raises(DefinitionError, match="margin = 5 on a 'drop' check"):
+        resolve([load_experiment(str(_write(tmp_path / "d.yaml", margin)))], "cpu", tmp_path)
     bad_ref = ok + "findings: [{id: z, claim: c, checks: [{kind: greater, pairs: [[DAgRL @ v, BC @ v]]}]}]\n"
     with pytest.raises(DefinitionError, match="'BC @ v'"):
         resolve([load_experiment(str(_write(tmp_path / "b.yaml", bad_ref)))], "cpu", tmp_path)
@@ -679,3 +692,19 @@ def test_paired_difference_pairs_two_table_entries_on_their_shared_episodes() ->
     assert d["diff"] == 100.0 and d["ci_low"] == 100.0 and d["p"] < 1e-5
     assert paired_difference(evals, a, {"eval": "c", "split": "val_seen"}, "sr") is None  # other episodes
     assert paired_difference(evals, a, {"eval": "b", "split": "val_unseen"}, "sr") is None  # other split
+
+
+def test_a_greater_check_with_a_margin_needs_the_gap_beyond_it() -> None:
+    from ovon.experiments.definitions import Check
+    from ovon.experiments.findings import judge_check, rule_text
+
+    chk = Check(kind="greater", pairs=(("A @ v", "B @ v"),), margin=5.0)
+    assert rule_text(chk) == "SR of A @ v > B @ v + 5"
+    values = {"A @ v": (30.0, 1.0), "B @ v": (24.0, 1.0)}
+    assert judge_check(chk, lambda r, m: values[r])["verdict"] == "holds"  # +6 > 5, within noise (2 std)
+    assert judge_check(chk, lambda r, m: values[r])["within_noise"]
+    values["B @ v"] = (26.0, 0.5)  # +4: not beyond the margin
+    assert judge_check(chk, lambda r, m: values[r])["verdict"] == "does not hold"
+    paired = {"diff": 4.0, "ci_low": 1.0, "ci_high": 7.0, "p": 0.01}
+    out = judge_check(chk, lambda r, m: values[r], lambda a, b, m: paired)
+    assert out["paired"]["verdict"] == "not shown (an interval includes 5)"

@@ -55,6 +55,9 @@ class LaunchSpec:
 
     nproc_per_node: int = 0
     torchrun_args: tuple[str, ...] = ("--standalone",)
+    # `ovon train --set` for every training cell of the scale, under the recipe's and the cell's own (the
+    # scale's perception, e.g. encoder.image: world-vl): one place instead of a copy in every recipe
+    set: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,7 @@ class Check:
     against: tuple[tuple[str, str], ...] = ()
     refs: tuple[str, ...] = ()
     tolerance: float = 0.0
+    margin: float = 0.0  # greater: a - b > margin (0: a > b)
 
 
 @dataclass(frozen=True)

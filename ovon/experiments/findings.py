@@ -32,7 +32,8 @@ def rule_text(chk: Check) -> str:
     if chk.kind == "best":
         return f"{m} of {chk.target} > {m} of each of {', '.join(chk.others)}"
     if chk.kind == "greater":
-        return "; ".join(f"{m} of {a} > {b}" for a, b in chk.pairs)
+        plus = f" + {chk.margin:g}" if chk.margin else ""
+        return "; ".join(f"{m} of {a} > {b}{plus}" for a, b in chk.pairs)
     if chk.kind == "flat":
         return f"max - min of {m} over {', '.join(chk.refs)} <= {chk.tolerance:g}"
     if chk.kind == "drop":
@@ -50,28 +51,29 @@ def _deciding(holds: bool, oks: list[bool], close: list[bool]) -> bool:
     return all(c for ok, c in zip(oks, close) if not ok)
 
 
-def _gaps(pairs: list[tuple[Value, Value]]) -> tuple[bool, bool, list[float]]:
-    gaps = [a[0] - b[0] for a, b in pairs]
+def _gaps(pairs: list[tuple[Value, Value]], margin: float = 0.0) -> tuple[bool, bool, list[float]]:
+    gaps = [a[0] - b[0] - margin for a, b in pairs]
     oks = [g > 0 for g in gaps]
-    close = [abs(a[0] - b[0]) < a[1] + b[1] for a, b in pairs]
+    close = [abs(g) < a[1] + b[1] for g, (a, b) in zip(gaps, pairs)]
     return all(oks), _deciding(all(oks), oks, close), gaps
 
 
 def paired_check(chk: Check, paired: Paired | None) -> dict | None:
     """The paired verdict of a `best` / `greater` check (same split, same episodes), else None: holds when
-    every interval lies above 0, does not hold when one lies below 0, otherwise not shown."""
+    every interval lies above the margin (0 unless the check sets one), does not hold when one lies below
+    it, otherwise not shown."""
     if paired is None or chk.kind not in ("best", "greater"):
         return None
     pairs = [(chk.target, o) for o in chk.others] if chk.kind == "best" else list(chk.pairs)
     stats = [paired(a, b, chk.metric) for a, b in pairs]
     if any(st is None for st in stats):
         return None
-    if all(st["ci_low"] > 0 for st in stats):
+    if all(st["ci_low"] > chk.margin for st in stats):
         verdict = "holds"
-    elif any(st["ci_high"] < 0 for st in stats):
+    elif any(st["ci_high"] < chk.margin for st in stats):
         verdict = "does not hold"
     else:
-        verdict = "not shown (an interval includes 0)"
+        verdict = f"not shown (an interval includes {chk.margin:g})"
     sign = " (SR sign test p {p:.2g})" if chk.metric == "sr" else ""
     numbers = "; ".join(
         f"{a} - {b} {st['diff']:+.1f} [{st['ci_low']:+.1f}, {st['ci_high']:+.1f}]" + sign.format(p=st["p"])
@@ -94,7 +96,7 @@ def judge_check(chk: Check, look: Lookup, paired: Paired | None = None) -> dict:
 
     if chk.kind in ("best", "greater"):
         pairs = [(chk.target, o) for o in chk.others] if chk.kind == "best" else list(chk.pairs)
-        holds, noisy, _ = _gaps([(v[a], v[b]) for a, b in pairs])
+        holds, noisy, _ = _gaps([(v[a], v[b]) for a, b in pairs], chk.margin if chk.kind == "greater" else 0.0)
         numbers = "; ".join(f"{show(a)} vs {show(b)}" for a, b in pairs)
     elif chk.kind == "flat":
         means = [v[r][0] for r in chk.refs]

@@ -38,7 +38,12 @@ from ovon.runfolder import flatten  # {"a": {"b": 1}, "c.d": 2} -> {"a.b": 1, "c
 from ovon.train.folder import EpisodeSource
 
 CAMERA_FIELDS = ("width", "height", "hfov_deg", "camera_height", "min_depth", "max_depth")
-PERCEPTION = {"oracle-vl": "oracle perception", "siglip": "SigLIP", "cnn": "CNN trained from pixels"}
+PERCEPTION = {
+    "oracle-vl": "oracle perception",
+    "world-vl": "learned perception (world-vl)",
+    "siglip": "SigLIP",
+    "cnn": "CNN trained from pixels",
+}
 
 
 def display(cell: Cell, argv: list[str]) -> str:
@@ -204,6 +209,7 @@ def _train_cell(plan: Plan, name: str) -> None:
         raise DefinitionError(f"{where}: init works with a ppo recipe (BC->RL, DAgger->RL), not {recipe.algo!r}")
     folder = plan.base / "train" / name
     overrides = {
+        **flatten(sc.train.set),
         **flatten(rs.set),
         **flatten(tc.set),
         **flatten(_per_scale(tc, sc.name).set),
@@ -417,7 +423,8 @@ def check_experiment(exp: Experiment, plan: Plan) -> None:
                         f"which evaluation cell {ev!r} does not run (splits: "
                         f"{', '.join(cells[ev].splits)})"
                     )
-                if paper_numbers(row, col.name, f"{w}: row {row.name!r}") is None:
+                # a row without any paper numbers (an upper bound of ours) is allowed; a partial one is a typo
+                if paper_numbers(row, col.name, f"{w}: row {row.name!r}") is None and row.paper:
                     raise DefinitionError(
                         f"{w}: row {row.name!r} has no paper numbers for column {col.name!r}; "
                         "fix: add paper.<column>: [SR, SR std, SPL, SPL std]"
@@ -476,3 +483,5 @@ def _check_shape(chk, where: str) -> None:
     missing = [k for k in need if not getattr(chk, k)]
     if missing:
         raise DefinitionError(f"{where}: a {chk.kind!r} check needs {', '.join(need)} (missing {', '.join(missing)})")
+    if chk.margin and chk.kind != "greater":
+        raise DefinitionError(f"{where}: margin = {chk.margin:g} on a {chk.kind!r} check; fix: margin is for 'greater'")

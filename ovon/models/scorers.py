@@ -143,7 +143,7 @@ def describe_scorer(cfg: ScorerConfig) -> str:
         "oracle-vl": "oracle-vl value",
         "siglip": "SigLIP value",
         "constant": "no value",
-        "world-vl": "world-vl value",
+        "world-vl": "world-vl value (learned)",
     }.get(  # fmt: skip
         cfg.kind, f"{cfg.kind} value"
     )

@@ -36,7 +36,7 @@ def describe_detector(cfg: DetectorConfig) -> str:
     if cfg.kind == "owlv2":
         return "OWLv2"
     if cfg.kind == "world-owl":
-        return "world-owl" + (f" ({cfg.checkpoint})" if cfg.checkpoint else "")
+        return "world-owl detection (learned" + (f", {cfg.checkpoint})" if cfg.checkpoint else ")")
     return cfg.kind
 
 
