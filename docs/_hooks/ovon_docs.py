@@ -10,6 +10,8 @@
 - `<!-- ovon:results -->` becomes the list of the committed experiment reports; each
   `experiments/results/<name>/report.md` is added to the site as it is, with its figures, as
   `results/<name>/report.md`.
+- `<!-- ovon:headline -->` becomes the results tables of the committed reports
+  (`ovon.experiments.headline`, the same text as the README's generated block).
 
 Nothing here downloads anything. tests/test_docs_build.py imports this module too.
 """
@@ -319,6 +321,12 @@ def results_index() -> str:
     return "\n".join(lines) + "\n"
 
 
+def headline_tables() -> str:
+    from ovon.experiments.headline import headline
+
+    return headline(RESULTS)  # the page is results/index.md: the reports sit beside it
+
+
 # ----------------------------------------------------------------------------------------------------
 # MkDocs events
 
@@ -327,6 +335,7 @@ MARKERS = {
     "<!-- ovon:cli -->": cli_reference,
     "<!-- ovon:config -->": config_reference,
     "<!-- ovon:results -->": results_index,
+    "<!-- ovon:headline -->": lambda: headline_tables(),  # defined below
     "<!-- ovon:looks -->": lambda: looks_reference(),  # defined below
 }
 

@@ -36,6 +36,17 @@ def register(sub) -> None:
     rep.add_argument("--out", help="report folder (default: <root>/<scale>/reports/<name>)")
     rep.set_defaults(func=cmd_report)
 
+    h = s.add_parser(
+        "headline",
+        help="the README's results tables from the committed reports: print them, rewrite the README's block, "
+        "or check it",
+    )
+    h.add_argument("--results", default="experiments/results", help="folder of the committed reports")
+    h.add_argument("--names", default="main", help="comma-separated experiments whose tables to show")
+    h.add_argument("--write", metavar="FILE", help="rewrite the generated block of FILE (e.g. README.md)")
+    h.add_argument("--check", metavar="FILE", help="exit 1 when FILE's generated block differs from the reports")
+    h.set_defaults(func=cmd_headline)
+
 
 def _common(p) -> None:
     p.add_argument(
@@ -147,3 +158,31 @@ def _only_scale(root: Path) -> str:
             f"--root {root} holds runs of scale(s) {found or 'none'}; fix: pass --scale (tiny | cpu | paper)"
         )
     return found[0]
+
+
+def cmd_headline(args) -> int:
+    from ovon.atomic import atomic_write_text
+    from ovon.experiments.headline import headline, replace_block
+
+    names = tuple(_csv(args.names))
+    block = headline(args.results, names, prefix=args.results.rstrip("/") + "/")
+    target = args.write or args.check
+    if not target:
+        print(block, end="")
+        return 0
+    path = Path(target)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ValueError(f"{target}: cannot read it ({e.strerror}); fix: name an existing file") from None
+    new = replace_block(text, block, target)
+    if args.check:
+        if new != text:
+            print(f"{target}: its results block differs from {args.results}; fix: ovon experiment headline --write {target}")
+            return 1
+        print(f"{target}: its results block matches {args.results}")
+        return 0
+    if new != text:
+        atomic_write_text(path, new)
+    print(f"{target}: results block {'rewritten' if new != text else 'already up to date'}")
+    return 0
