@@ -178,7 +178,8 @@ def cmd_headline(args) -> int:
     new = replace_block(text, block, target)
     if args.check:
         if new != text:
-            print(f"{target}: its results block differs from {args.results}; fix: ovon experiment headline --write {target}")
+            fix = f"ovon experiment headline --write {target}"
+            print(f"{target}: its results block differs from {args.results}; fix: {fix}")
             return 1
         print(f"{target}: its results block matches {args.results}")
         return 0
