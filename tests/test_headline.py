@@ -84,6 +84,13 @@ def test_write_then_check_and_clear_errors(tmp_path: Path) -> None:
     assert code == 2 and "none/main/report.json: no such report" in err and len(err.strip().splitlines()) == 1
     with pytest.raises(HeadlineError, match="no '<!-- ovon:headline"):
         replace_block("no block here\n", "x", "README.md")
+    (tmp_path / "results" / "main" / "report.json").write_text('{"experiments": {"main": {}}}', encoding="utf-8")
+    code, _, err = _run(["experiment", "headline", "--results", results])
+    assert code == 2 and "has no table" in err
+    broken = '{"scale": "cpu", "experiments": {"main": {"title": "t", "table": {"columns": ["v"], "rows": [{}]}}}}'
+    (tmp_path / "results" / "main" / "report.json").write_text(broken, encoding="utf-8")
+    code, _, err = _run(["experiment", "headline", "--results", results])
+    assert code == 2 and "lacks what `ovon experiment report` writes" in err and len(err.strip().splitlines()) == 1
     (tmp_path / "results" / "main" / "report.json").write_text("{", encoding="utf-8")
     code, _, err = _run(["experiment", "headline", "--results", results])
     assert code == 2 and "not a report" in err

@@ -104,8 +104,16 @@ def findings(results: Path) -> list[str]:
 def headline(results: str | Path, names: tuple[str, ...] = DEFAULT, prefix: str = "") -> str:
     """The tables of `names`, each report linked as `prefix + <name>/report.md`, then every finding."""
     results = Path(results)
-    parts = [table(results, n, f"{prefix}{n}/report.md") for n in names]
-    parts.append(findings(results))
+    try:
+        parts = [table(results, n, f"{prefix}{n}/report.md") for n in names]
+        parts.append(findings(results))
+    except (KeyError, TypeError, IndexError, ValueError) as e:
+        if isinstance(e, HeadlineError):
+            raise
+        raise HeadlineError(
+            f"{results}: a report there lacks what `ovon experiment report` writes ({type(e).__name__}: {e}); "
+            "fix: write it again"
+        ) from None
     return "\n\n".join("\n".join(p) for p in parts if p) + "\n"
 
 
