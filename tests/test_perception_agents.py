@@ -64,7 +64,8 @@ def test_a_policy_trains_on_the_frozen_world_vl_encoder_and_is_served_without_gr
 
 def test_world_vl_env_batches_give_the_same_embeddings_on_any_number_of_workers() -> None:
     """A vector env worker encodes its envs' frames in one batch; a frame's embedding is bitwise the same
-    in-process, on 1 or 3 workers, and through the single-frame path a policy agent uses."""
+    in-process and on 1 or 3 workers. The single-frame path a policy agent uses (batch 1, unpadded) equals
+    it up to float rounding and shares its forward pass with a world-owl detector on the same frame."""
     import dataclasses
 
     import numpy as np
@@ -95,7 +96,26 @@ def test_world_vl_env_batches_give_the_same_embeddings_on_any_number_of_workers(
         assert torch.equal(a, b) and torch.equal(a, c)
     assert runs[0][0].abs().sum() > 0
     single = make_image_encoder(encoder)
-    frame = {"rgb": np.zeros((128, 72, 3), np.uint8), "depth": np.ones((128, 72), np.float32)}
+    frame = {"rgb": rng.integers(0, 255, (128, 72, 3), dtype=np.uint8), "depth": np.ones((128, 72), np.float32),
+             "collided": 1}  # fmt: skip
     both = single.encode({"rgb": np.stack([frame["rgb"]] * 3), "depth": np.stack([frame["depth"]] * 3),
-                          "collided": np.zeros(3)})  # fmt: skip
-    assert np.array_equal(encode_observation(single, frame), both[0].numpy())
+                          "collided": np.ones(3)})  # fmt: skip
+    one = encode_observation(single, frame)
+    assert one.shape == tuple(both[0].shape)
+    np.testing.assert_allclose(one, both[0].numpy(), rtol=1e-4, atol=1e-5)
+    assert np.array_equal(one, encode_observation(single, frame))  # deterministic on its own
+    from ovon.models.config import DetectorConfig
+    from ovon.models.world.roles import WorldOWLDetector
+
+    detector = WorldOWLDetector(DetectorConfig(kind="world-owl"))
+    assert detector.model is single.model  # one loaded network: the frame's forward pass is shared
+    calls = []
+    forward = single.model.features
+    single.model.features = lambda rgb: calls.append(len(rgb)) or forward(rgb)
+    try:
+        frame["rgb"] = rng.integers(0, 255, (128, 72, 3), dtype=np.uint8)
+        encode_observation(single, frame)
+        detector.detect({"rgb": frame["rgb"], "depth": frame["depth"]}, "chair")
+    finally:
+        del single.model.features
+    assert calls == [1]

@@ -93,6 +93,9 @@ def encode_observation(encoder: ImageEncoder, obs: dict, semantic: Any = None) -
     `semantic` (H, W) instance ids is the privileged frame, needed by the oracle encoder only."""
     if semantic is not None and hasattr(encoder, "encode_one"):  # the oracle: no batch of one to build
         return encoder.encode_one(semantic, obs.get("depth"), int(obs.get("collided", 0)))
+    if hasattr(encoder, "encode_frame"):  # world-vl: an unpadded forward pass of one frame
+        frame = {k: obs[k] for k in ("rgb", "depth") if k in obs}
+        return encoder.encode_frame(frame | {"collided": obs.get("collided", 0)})
     batch: dict[str, Any] = {
         "depth": np.asarray(obs["depth"])[None],
         "collided": np.array([int(obs.get("collided", 0))]),

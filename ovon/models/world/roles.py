@@ -72,18 +72,36 @@ class WorldVLEncoder:
             out.append(torch.cat([*parts, regions], dim=1).flatten(1)[:n])
         return torch.cat(out)
 
+    def encode_frame(self, obs: dict) -> np.ndarray:
+        """One frame (an agent acting, one env without a vector worker): a forward pass of batch 1 instead of
+        a padded chunk, about half the cost (4 instead of 9 ms per step on one thread), shared with a
+        world-owl detector or world-vl scorer reading the same frame (`WorldVL.frame_features`). It equals
+        `encode` up to float rounding (batch-size-dependent kernels), not bit for bit; each path is
+        deterministic on its own."""
+        top, obj, _ = self.model.frame_features(np.asarray(obs["rgb"]))
+        with torch.inference_mode():
+            whole, regions = self.model.net.pooled(top, obj, self.grid)
+        parts = [whole[:, None]] if self.include_global else []
+        return self._with_geometry(
+            torch.cat([*parts, regions], dim=1).flatten(1), {k: np.asarray(v)[None] for k, v in obs.items()}
+        )[0].numpy()
+
     def encode(self, batch: ObsBatch) -> torch.Tensor:
         rgb = np.asarray(get_obs(batch, "rgb"))
         if rgb.ndim == 3:
             rgb = rgb[None]
-        out = [self._semantic(rgb)]
+        return self._with_geometry(self._semantic(rgb), batch)
+
+    def _with_geometry(self, semantic: torch.Tensor, batch: ObsBatch) -> torch.Tensor:
+        """The semantic part followed by the depth grid and the bump flag."""
+        out = [semantic]
         if self.depth_grid[0] > 0:
             depth = np.asarray(get_obs(batch, "depth"))
             depth = depth[None] if depth.ndim == 2 else depth
             feats = np.stack([depth_grid_features(d, self.depth_grid, self.max_depth) for d in depth])
             out.append(torch.from_numpy(feats))
         if self.collision:
-            bump = np.asarray(get_obs(batch, "collided"), dtype=np.float32).reshape(len(rgb), 1)
+            bump = np.asarray(get_obs(batch, "collided"), dtype=np.float32).reshape(len(semantic), 1)
             out.append(torch.from_numpy(bump))
         return torch.cat(out, dim=1).float()
 
