@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
+from ovon.atomic import atomic_write_text  # noqa: E402
 from ovon.config.sim import AgentConfig  # noqa: E402
 from ovon.experts import FrontierExpert, FrontierExpertConfig  # noqa: E402
 from ovon.experts.gridsim import grid_from_arrays, room_grid  # noqa: E402
@@ -184,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=2))
+    atomic_write_text(path, json.dumps(out, indent=2))
     print(f"wrote {path}")
     return 0
 

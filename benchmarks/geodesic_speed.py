@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-
 from meshes import empty_floor, grid_house, scene_from_boxes  # noqa: E402
 
+from ovon.atomic import atomic_write_text  # noqa: E402
 from ovon.sim import geodesic, navgrid  # noqa: E402
 
 
@@ -157,7 +157,7 @@ def main() -> None:
         "accuracy_empty_floor": accuracy,
         "note": "nav_build_first_s includes numba JIT (or loading its on-disk cache); other times are warm",
     }
-    out.write_text(json.dumps(result, indent=2))
+    atomic_write_text(out, json.dumps(result, indent=2))
     print(f"wrote {out}")
 
 

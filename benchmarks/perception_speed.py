@@ -18,9 +18,9 @@ has its RGB, depth, bump flag, semantic frame and goal). Timed, in rotating orde
   cell pooling, and the connected components of the frames that pass the threshold) from the same features;
   the stack of the frames is in the time. Every embedding and detection is checked against the roles'
   own `WorldVLEncoder.encode` / `WorldOWLDetector.detect` (`agreement` in the JSON);
-* `world-vl roles, batch 1`: what runs per env step today, `encode_observation(WorldVLEncoder)` and
-  `WorldOWLDetector.detect` frame by frame (the encoder does not fill the detector's frame cache, so this is
-  two forward passes per frame);
+* `world-vl roles, batch 1`: what an agent acting alone runs per step (DAgRL+OD), `encode_observation(
+  WorldVLEncoder)` (`encode_frame`: an unpadded forward pass of one frame) and `WorldOWLDetector.detect` on the
+  same frame, which reuses that forward pass through `WorldVL.frame_features`;
 * `oracle`: `OracleVLEncoder.encode_one` (what the env's encoding wrapper calls) + `OracleDetector.detect`,
   frame by frame (the oracle has no batched path), from the semantic frames.
 
@@ -60,6 +60,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # train_throughput.bench_online
+from ovon.atomic import atomic_write_text  # noqa: E402
 
 TARGET_MS = 3.0  # encoder + detector, CPU ms per frame on one core
 TARGET_RATIO = 0.4  # world-vl env steps/s / oracle-vl env steps/s
@@ -233,7 +234,8 @@ class WorldBatched:
 
 
 def roles_batch1(world: WorldBatched, f: dict):
-    """What an env step runs today: the encoder's batch of one, then the detector on the same frame."""
+    """What an agent acting alone runs per step: the encoder's batch of one, then the detector on the same
+    frame (one shared forward pass)."""
     from ovon.models.encoders import encode_observation
 
     obs = {"rgb": f["rgb"], "depth": f["depth"], "collided": f["collided"]}
@@ -585,7 +587,7 @@ def main() -> None:
     result["seconds"] = time.perf_counter() - t0
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=1) + "\n")
+    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
     print(f"\nwrote {out} ({result['seconds']:.0f} s)")
 
 

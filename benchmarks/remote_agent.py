@@ -31,9 +31,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from ovon.agents import make_agent  # noqa: E402
 from ovon.agents.remote import RemoteAgent, RemoteConfig  # noqa: E402
+from ovon.atomic import atomic_write_text  # noqa: E402
 from ovon.config.sim import CameraConfig, SimConfig  # noqa: E402
 from ovon.env.bench import pick_goal  # noqa: E402
 from ovon.env.core import ObjectNavEnv  # noqa: E402
@@ -188,7 +188,7 @@ def main() -> None:
         "results": results,
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=2) + "\n")
+    atomic_write_text(Path(args.out), json.dumps(out, indent=2) + "\n")
     print(f"wrote {args.out}")
 
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
+from ovon.atomic import atomic_write_text  # noqa: E402
 from ovon.config.sim import CameraConfig  # noqa: E402
 from ovon.scenes.model import Mesh, Scene  # noqa: E402
 
@@ -250,7 +250,7 @@ def main() -> int:
                     print(table_line(label, res), flush=True)
     doc["meta"]["loadavg_end"] = list(os.getloadavg())
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(doc, indent=2))
+    atomic_write_text(Path(args.out), json.dumps(doc, indent=2))
     print(f"load average {doc['meta']['loadavg_start'][0]:.2f} -> {doc['meta']['loadavg_end'][0]:.2f}; "
           f"wrote {args.out}")  # fmt: skip
     return 0

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from ovon.atomic import atomic_write_text  # noqa: E402
 
 
 def peak_rss_mb() -> float:
@@ -256,7 +257,7 @@ def main() -> int:
         f"triangles: house {base['triangles']:,}, scan {res['triangles']:,}; scan files {res['file_mb']:.1f} MB; "
         f"load average {meta['loadavg_start'][0]:.2f} -> {meta['loadavg_end'][0]:.2f}"
     )
-    Path(args.out).write_text(json.dumps(doc, indent=2))
+    atomic_write_text(Path(args.out), json.dumps(doc, indent=2))
     print(f"wrote {args.out}")
     return 0
 

@@ -38,9 +38,9 @@ os.environ.setdefault("LP_NUM_THREADS", "0")
 # The ovon tree to measure: this checkout, or (with --baseline-rev) the baseline's, run by this same script.
 TREE = Path(os.environ.get("OVON_BENCH_TREE") or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(TREE))
-
 import numpy as np  # noqa: E402
 
+from ovon.atomic import atomic_write_text  # noqa: E402
 from ovon.config.sim import CameraConfig, SimConfig  # noqa: E402
 from ovon.env.bench import _cpu_seconds, _result, measure_throughput, pick_goal  # noqa: E402
 from ovon.env.stack import EnvRecipe  # noqa: E402
@@ -309,7 +309,7 @@ def _run(args, configs: list[str], base_dir: Path | None, base_code: str | None)
         "rows": rows,
     }
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1))
+    atomic_write_text(Path(args.out), json.dumps(result, indent=1))
     print(f"wrote {args.out}")
     return 0
 

@@ -51,7 +51,7 @@ import numpy as np
 # The ovon tree to measure: this checkout, or (compare mode) the baseline's, run by this same script.
 TREE = Path(os.environ.get("OVON_BENCH_TREE") or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(TREE))
-
+from ovon.atomic import atomic_write_text  # noqa: E402
 from ovon.config.base import parse_seed_list  # noqa: E402
 from ovon.train.config import train_preset  # noqa: E402
 from ovon.train.episodes import adhoc_specs  # noqa: E402
@@ -369,7 +369,7 @@ def compare(args) -> None:
             f"as the baseline: {entry.get('same_learning_as_baseline', 'n/a')}"
         )
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(summary, indent=1))
+    atomic_write_text(Path(args.out), json.dumps(summary, indent=1))
     print(f"wrote {args.out}")
 
 
@@ -487,7 +487,7 @@ def main() -> None:
     finally:
         shutil.rmtree(root, ignore_errors=True)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1))
+    atomic_write_text(Path(args.out), json.dumps(result, indent=1))
     print(f"wrote {args.out}")
 
 

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from ovon.agents import make_agent  # noqa: E402
+from ovon.atomic import atomic_write_text  # noqa: E402
 from ovon.config.sim import cpu_sim_config  # noqa: E402
 from ovon.env.core import ObjectNavEnv  # noqa: E402
 from ovon.scenes.procedural import generate_house  # noqa: E402
@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"ratio vlfm / frontier: median {r['median']:.1f}x, mean {r['mean']:.1f}x, cpu median {r['median_cpu']:.1f}x")
     path = Path(args.out)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=2))
+    atomic_write_text(path, json.dumps(out, indent=2))
     print(f"wrote {path}")
     return 0
 
