@@ -96,7 +96,7 @@ def judge_check(chk: Check, look: Lookup, paired: Paired | None = None) -> dict:
 
     if chk.kind in ("best", "greater"):
         pairs = [(chk.target, o) for o in chk.others] if chk.kind == "best" else list(chk.pairs)
-        holds, noisy, _ = _gaps([(v[a], v[b]) for a, b in pairs], chk.margin if chk.kind == "greater" else 0.0)
+        holds, noisy, _ = _gaps([(v[a], v[b]) for a, b in pairs], chk.margin)  # margin: only on greater
         numbers = "; ".join(f"{show(a)} vs {show(b)}" for a, b in pairs)
     elif chk.kind == "flat":
         means = [v[r][0] for r in chk.refs]

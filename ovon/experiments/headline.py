@@ -13,7 +13,6 @@ from ovon.experiments.provenance import headline as provenance_line
 BEGIN = "<!-- ovon:headline (generated from experiments/results by `ovon experiment headline`; do not edit) -->"
 END = "<!-- /ovon:headline -->"
 DEFAULT = ("main",)
-EXPERIMENTS = ("main", "trajectories", "memory", "noise", "failures")  # whose findings the summary lists
 # `<name>-oracle/`: the same experiment run with oracle perception, kept beside the learned-perception report
 ORACLE = "-oracle"
 
@@ -77,8 +76,10 @@ def _verdict(found: dict | None) -> str:
 def findings(results: Path) -> list[str]:
     """Every finding of the committed reports: the paper's verdict under the same rule, ours, and ours with
     oracle perception where that run is kept (`<name>-oracle/`); empty when no report has findings."""
+    from ovon.experiments import experiment_names
+
     rows = []
-    for name in EXPERIMENTS:
+    for name in experiment_names():
         if not (results / name / "report.json").is_file():
             continue
         oracle = {}
