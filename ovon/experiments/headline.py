@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ovon.experiments.definitions import experiment_names
 from ovon.experiments.provenance import headline as provenance_line
 
 BEGIN = "<!-- ovon:headline (generated from experiments/results by `ovon experiment headline`; do not edit) -->"
@@ -76,8 +77,6 @@ def _verdict(found: dict | None) -> str:
 def findings(results: Path) -> list[str]:
     """Every finding of the committed reports: the paper's verdict under the same rule, ours, and ours with
     oracle perception where that run is kept (`<name>-oracle/`); empty when no report has findings."""
-    from ovon.experiments import experiment_names
-
     rows = []
     for name in experiment_names():
         if not (results / name / "report.json").is_file():
