@@ -229,6 +229,9 @@ def test_missing_paper_numbers_and_bad_references_are_refused(tmp_path: Path) ->
     bad_ref = ok + "findings: [{id: z, claim: c, checks: [{kind: greater, pairs: [[DAgRL @ v, BC @ v]]}]}]\n"
     with pytest.raises(DefinitionError, match="'BC @ v'"):
         resolve([load_experiment(str(_write(tmp_path / "b.yaml", bad_ref)))], "cpu", tmp_path)
+    why = ok + "findings: [{id: z, claim: c, differs: {huge: s}, checks: [{kind: best, target: DAgRL @ v}]}]\n"
+    with pytest.raises(DefinitionError, match="finding z: differs.huge = 's'; expected a scale of scales.yaml"):
+        resolve([load_experiment(str(_write(tmp_path / "e.yaml", why)))], "cpu", tmp_path)
     with pytest.raises(DefinitionError, match="unknown scale 'huge'"):
         resolve([load_experiment("main")], "huge", tmp_path)
     with pytest.raises(DefinitionError, match="seeds"):
@@ -708,3 +711,20 @@ def test_a_greater_check_with_a_margin_needs_the_gap_beyond_it() -> None:
     paired = {"diff": 4.0, "ci_low": 1.0, "ci_high": 7.0, "p": 0.01}
     out = judge_check(chk, lambda r, m: values[r], lambda a, b, m: paired)
     assert out["paired"]["verdict"] == "not shown (an interval includes 5)"
+
+
+def test_a_verdict_that_differs_from_the_papers_carries_its_reason_or_says_it_has_none() -> None:
+    from ovon.experiments.definitions import Check, Finding
+    from ovon.experiments.report import finding_result, findings_markdown
+
+    f = Finding(id="q", claim="c", checks=(Check(kind="greater", pairs=(("A @ v", "B @ v"),)),), differs={"cpu": "S."})
+    holds, fails, missing = (
+        {"verdict": v, "within_noise": False, "checks": []} for v in ("holds", "does not hold", "not run")
+    )
+    assert finding_result(f, fails, holds, "cpu", "x.yaml")["differs"] == "S."
+    unexplained = finding_result(f, fails, holds, "paper", "x.yaml")["differs"]
+    assert unexplained.startswith("not explained yet") and "finding q in x.yaml" in unexplained
+    assert "differs" not in finding_result(f, holds, holds, "cpu", "x.yaml")  # agrees: nothing to explain
+    assert "differs" not in finding_result(f, missing, holds, "cpu", "x.yaml")  # not judged yet
+    text = "\n".join(findings_markdown([finding_result(f, fails, holds, "cpu", "x.yaml")]))
+    assert "here **does not hold**; paper: holds." in text and "why it differs from the paper's: S." in text

@@ -200,6 +200,9 @@ class Finding:
     claim: str = ""
     checks: tuple[Check, ...] = ()
     note: str = ""
+    # scale -> one sentence: why our verdict there differs from the paper's. Written after a run has shown
+    # it (it interprets a result); the report prints it only while the two verdicts differ.
+    differs: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

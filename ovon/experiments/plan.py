@@ -453,6 +453,12 @@ def check_experiment(exp: Experiment, plan: Plan) -> None:
         if not f.id or f.id in ids or not f.checks:
             raise DefinitionError(f"{w}: every finding needs a distinct id and at least one check ({f.id!r})")
         ids.add(f.id)
+        for sc, why in f.differs.items():
+            if sc not in plan.catalogue.scales or not str(why).strip():
+                raise DefinitionError(
+                    f"{w}: finding {f.id}: differs.{sc} = {why!r}; expected a scale of scales.yaml "
+                    f"({', '.join(plan.catalogue.scales)}) -> one non-empty sentence"
+                )
         for chk in f.checks:
             for ref in check_refs(chk):
                 if parse_ref(ref, f"{w}: finding {f.id}") not in entries:

@@ -17,7 +17,7 @@ from typing import Any
 from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
-from ovon.experiments.definitions import Experiment, paper_numbers, parse_ref, row_eval
+from ovon.experiments.definitions import Experiment, Finding, paper_numbers, parse_ref, row_eval
 from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, judge
 from ovon.experiments.outputs import last_update
 from ovon.experiments.plan import PERCEPTION
@@ -141,14 +141,14 @@ def collect(plan: Plan) -> dict:
         "cells": _cells_info(plan, statuses, prov),
     }
     for exp in plan.experiments:
-        out["experiments"][exp.name] = experiment_results(exp, evals)
+        out["experiments"][exp.name] = experiment_results(exp, evals, plan.scale.name)
     for info in evals.values():
         info.pop("records", None)
     out["evaluations"] = evals
     return out
 
 
-def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
+def experiment_results(exp: Experiment, evals: dict[str, dict], scale: str = "") -> dict:
     """An experiment's table, figures and findings from `evals` (evaluation cell -> {"summary", "status",
     "setup", "records"}); findings are judged on ours and on the paper's numbers."""
     from ovon.reports.compare import failure_breakdown
@@ -231,16 +231,22 @@ def experiment_results(exp: Experiment, evals: dict[str, dict]) -> dict:
         )
 
     res["findings"] = [
-        {
-            "id": f.id,
-            "claim": f.claim,
-            "note": f.note,
-            "ours": judge(f, look("ours"), paired),
-            "paper": judge(f, look("paper")),
-        }
+        finding_result(f, judge(f, look("ours"), paired), judge(f, look("paper")), scale, exp.source)
         for f in exp.findings
     ]
     return res
+
+
+def finding_result(f: Finding, ours: dict, paper: dict, scale: str, source: str) -> dict:
+    """A judged finding; where our verdict and the paper's differ (both judged), `differs` holds the
+    definition's sentence for `scale`, or says where to write one (a difference is never left silent)."""
+    out = {"id": f.id, "claim": f.claim, "note": f.note, "ours": ours, "paper": paper}
+    judged = "not run" not in (ours["verdict"], paper["verdict"])
+    if judged and ours["verdict"] != paper["verdict"]:
+        out["differs"] = f.differs.get(scale) or (
+            f"not explained yet (fix: add `differs: {{{scale}: SENTENCE}}` to finding {f.id} in {source})"
+        )
+    return out
 
 
 def paired_difference(evals: dict[str, dict], a: dict, b: dict, metric: str) -> dict | None:
@@ -372,6 +378,8 @@ def findings_markdown(findings: list[dict]) -> list[str]:
             lines.append(f"  - rule: {c['rule']}; ours: {c['numbers']}")
             if c.get("paired"):
                 lines.append(f"  - paired: **{c['paired']['verdict']}**: {c['paired']['numbers']}")
+        if "differs" in f:
+            lines.append(f"  - why it differs from the paper's: {f['differs']}")
         if f["note"]:
             lines.append(f"  - note: {f['note']}")
     return lines
