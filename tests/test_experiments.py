@@ -116,7 +116,7 @@ def test_every_table_entry_has_the_papers_numbers_and_they_satisfy_its_findings(
                 evals[name] = {"summary": None, "status": "missing", "setup": ""}
         for fig in exp.figures:
             evals[fig.eval] = {"summary": None, "status": "missing", "setup": ""}
-        res = experiment_results(exp, evals)
+        res = experiment_results(exp, evals, "cpu")
         for row in res.get("table", {}).get("rows", []):
             for entry in row["cells"].values():
                 # only our upper-bound rows have no paper numbers

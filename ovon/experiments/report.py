@@ -148,9 +148,10 @@ def collect(plan: Plan) -> dict:
     return out
 
 
-def experiment_results(exp: Experiment, evals: dict[str, dict], scale: str = "") -> dict:
+def experiment_results(exp: Experiment, evals: dict[str, dict], scale: str) -> dict:
     """An experiment's table, figures and findings from `evals` (evaluation cell -> {"summary", "status",
-    "setup", "records"}); findings are judged on ours and on the paper's numbers."""
+    "setup", "records"}); findings are judged on ours and on the paper's numbers. `scale` picks each
+    finding's `differs` sentence (required: an empty one would print a fix naming no scale)."""
     from ovon.reports.compare import failure_breakdown
 
     res: dict[str, Any] = {"title": exp.title, "paper_ref": exp.paper_ref, "description": exp.description}
