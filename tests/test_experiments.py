@@ -30,7 +30,8 @@ from ovon.experiments import (
     write_experiment_report,
 )
 from ovon.experiments.plan import train_spec
-from ovon.experiments.report import experiment_results
+from ovon.experiments.report import experiment_results, wall_text
+from ovon.experiments.runner import killed_wall_s
 from ovon.experiments.select import DATA
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -382,6 +383,9 @@ def test_tiny_run_survives_a_kill_resumes_without_repeating_and_reports(tmp_path
     # what each attempt ran with is recorded, the killed one included, and the resolved config
     ft = _record(root, "train:t-ft")
     assert [h["rc"] for h in ft["history"]] == ["killed", 0] and all(h["code"] == ft["code"] for h in ft["history"])
+    killed = ft["history"][0]  # its time is estimated from its log, and counted in the cell's
+    assert killed["wall_estimated"] and killed["wall_s"] >= 0
+    assert ft["wall_s"] == pytest.approx(killed["wall_s"] + ft["history"][1]["wall_s"], abs=0.2)
     assert ft["code"].startswith("ovon ") and ft["config"]["algo"] == "ppo"
     assert ft["config"]["text_cache"] == "$ROOT/tiny/data/text_cache.pt"
     assert _record(root, "eval:t-ft")["config"]["agent_kwargs"]["checkpoint"] == "$ROOT/tiny/train/t-ft/policy.pt"
@@ -728,3 +732,18 @@ def test_a_verdict_that_differs_from_the_papers_carries_its_reason_or_says_it_ha
     assert "differs" not in finding_result(f, missing, holds, "cpu", "x.yaml")  # not judged yet
     text = "\n".join(findings_markdown([finding_result(f, fails, holds, "cpu", "x.yaml")]))
     assert "here **does not hold**; paper: holds." in text and "why it differs from the paper's: S." in text
+
+
+def test_a_killed_attempt_without_a_time_is_named_beside_the_wall_time(tmp_path: Path) -> None:
+    """Records from before the estimate hold a killed attempt with no time: the sum is a lower bound."""
+    assert wall_text({"wall_min": 5.5, "untimed": 0}) == "5.5"
+    assert wall_text({"wall_min": 5.5, "untimed": 1}) == "5.5 (+ 1 killed attempt, time not recorded)"
+    assert wall_text({"wall_min": 5.5, "untimed": 2}).endswith("(+ 2 killed attempts, time not recorded)")
+    log = tmp_path / "cell.log"
+    log.write_text("===== x\n")
+    started = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(log.stat().st_mtime - 90))
+    assert killed_wall_s(started, log) == pytest.approx(90, abs=1.5)
+    assert killed_wall_s(started, tmp_path / "missing.log") is None
+    assert killed_wall_s(None, log) is None and killed_wall_s("garbage", log) is None
+    later = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(log.stat().st_mtime + 3600))
+    assert killed_wall_s(later, log) is None

@@ -306,6 +306,7 @@ def _cells_info(plan: Plan, statuses: dict[str, Status], prov: dict) -> dict:
             "detail": portable_text(plan, statuses[cid].detail),
             "commands": full_commands(plan, cell),
             "wall_min": round(float(rec.get("wall_s", 0.0)) / 60, 1),
+            "untimed": sum(1 for h in rec.get("history", []) if h.get("wall_s") is None),
             "attempts": rec.get("attempts", 0),
             "code": ", ".join(mine.get("code", [])),
             "marked": bool(mine.get("marked")),
@@ -318,6 +319,13 @@ def _cells_info(plan: Plan, statuses: dict[str, Status], prov: dict) -> dict:
 
 
 # ----- markdown --------------------------------------------------------------------------------------
+def wall_text(info: dict) -> str:
+    """The cell's wall time in minutes; killed attempts from before their time was estimated are named, so
+    the sum is read as the lower bound it is."""
+    n = info.get("untimed", 0)
+    return f"{info['wall_min']}" + (f" (+ {n} killed attempt{'s' * (n > 1)}, time not recorded)" if n else "")
+
+
 def fmt(value: tuple[float, float] | None) -> str:
     return "–" if value is None else f"{value[0]:.1f} ± {value[1]:.1f}"
 
@@ -425,7 +433,7 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
             parts.append(
                 f"| {cid[6:]}{mark} | {info['status']} | {info['updates'] or '–'} / "
                 f"{info['planned_updates'] or '?'}"
-                f" | {info['wall_min']} | {info['attempts']} |"
+                f" | {wall_text(info)} | {info['attempts']} |"
             )
     legend = "; ".join(f"`{k}` is {v}" for k, v in data["paths"].items())
     parts += [
@@ -445,7 +453,7 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
     for cid, info in data["cells"].items():
         code = f", {info['code']}" if info["code"] else ""
         mark = f" {MARK}" if info["marked"] else ""
-        parts += [f"# {cid}: {info['status']}, {info['wall_min']} min{code}{mark}", *info["commands"]]
+        parts += [f"# {cid}: {info['status']}, {wall_text(info)} min{code}{mark}", *info["commands"]]
     parts += ["```", ""]
     return "\n".join(parts)
 

@@ -158,10 +158,14 @@ def commands_to_run(cell: Cell) -> list[list[str]]:
 def execute(plan: Plan, cell: Cell, progress=None) -> int:
     """Run the cell's commands under its record; returns the exit code (0 = finished)."""
     rec = read_record(plan, cell) or {}
+    log = log_path(plan, cell)
     if rec.get("state") == "running":  # the attempt before died with its runner: keep what it ran with
+        wall = killed_wall_s(rec.get("started"), log)
         rec.setdefault("history", []).append(
-            {"started": rec.get("started"), "wall_s": None, "rc": "killed", "code": rec.get("code")}
+            {"started": rec.get("started"), "wall_s": wall, "rc": "killed", "code": rec.get("code")}
+            | ({"wall_estimated": True} if wall is not None else {})
         )
+        rec["wall_s"] = round(float(rec.get("wall_s", 0.0)) + (wall or 0.0), 1)
     rec.update(
         {
             "kind": cell.kind,
@@ -175,7 +179,6 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
         }
     )  # an unfinished attempt's inputs too: see `cell_status`
     write_record(plan, cell, rec)
-    log = log_path(plan, cell)
     t0 = time.perf_counter()
     rc = 0
     task = None
@@ -213,6 +216,17 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
         rec.update({"state": "failed", "rc": rc})
     _finish_record(plan, cell, rec, t0)
     return rc
+
+
+def killed_wall_s(started: str | None, log: Path) -> float | None:
+    """A killed attempt's wall time, estimated as its start to the last line it logged (the runner died
+    with it and could not time it); None when either is missing or they disagree."""
+    try:
+        begin = time.mktime(time.strptime(started or "", "%Y-%m-%d %H:%M:%S"))
+        wall = log.stat().st_mtime - begin
+    except (OSError, ValueError, OverflowError):
+        return None
+    return round(wall, 1) if wall >= 0 else None
 
 
 def _finish_record(plan: Plan, cell: Cell, rec: dict, t0: float) -> None:
