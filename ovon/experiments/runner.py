@@ -32,6 +32,7 @@ from ovon.experiments.status import Status, plan_status
 from ovon.experiments.tokens import full_commands
 
 POLL_S = 2.0
+STAMP = "%Y-%m-%d %H:%M:%S"  # attempt starts and log headers; parsed back to time a killed attempt
 
 
 def say(console: Console, text: str) -> None:
@@ -111,7 +112,7 @@ def run_command(cell: Cell, argv: list[str], log: Path, on_poll=None, on_start=N
     called once the child runs, `on_poll()` every `POLL_S` seconds while it does."""
     log.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "ab") as f:
-        f.write(f"\n===== {time.strftime('%Y-%m-%d %H:%M:%S')} {display(cell, argv)}\n".encode())
+        f.write(f"\n===== {time.strftime(STAMP)} {display(cell, argv)}\n".encode())
         f.flush()
         proc = subprocess.Popen(
             exec_argv(cell, argv),
@@ -161,18 +162,18 @@ def execute(plan: Plan, cell: Cell, progress=None) -> int:
     log = log_path(plan, cell)
     if rec.get("state") == "running":  # the attempt before died with its runner: keep what it ran with
         wall = killed_wall_s(rec.get("started"), log)
-        rec.setdefault("history", []).append(
+        _add_attempt(
+            rec,
             {"started": rec.get("started"), "wall_s": wall, "rc": "killed", "code": rec.get("code")}
-            | ({"wall_estimated": True} if wall is not None else {})
+            | ({"wall_estimated": True} if wall is not None else {}),
         )
-        rec["wall_s"] = round(float(rec.get("wall_s", 0.0)) + (wall or 0.0), 1)
     rec.update(
         {
             "kind": cell.kind,
             "name": cell.name,
             "state": "running",
             "attempts": int(rec.get("attempts", 0)) + 1,
-            "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "started": time.strftime(STAMP),
             "code": code_version(),
             "config": resolved_config(plan, cell),
             "inputs": inputs(plan, cell),
@@ -222,7 +223,7 @@ def killed_wall_s(started: str | None, log: Path) -> float | None:
     """A killed attempt's wall time, estimated as its start to the last line it logged (the runner died
     with it and could not time it); None when either is missing or they disagree."""
     try:
-        begin = time.mktime(time.strptime(started or "", "%Y-%m-%d %H:%M:%S"))
+        begin = time.mktime(time.strptime(started or "", STAMP))
         wall = log.stat().st_mtime - begin
     except (OSError, ValueError, OverflowError):
         return None
@@ -231,22 +232,28 @@ def killed_wall_s(started: str | None, log: Path) -> float | None:
 
 def _finish_record(plan: Plan, cell: Cell, rec: dict, t0: float) -> None:
     wall = time.perf_counter() - t0
-    rec["wall_s"] = round(float(rec.get("wall_s", 0.0)) + wall, 1)
     end = code_version()  # the tree may have changed while the cell ran: then it ran with both
     if end != rec.get("code"):
         rec["code_end"] = end
     else:
         rec.pop("code_end", None)
-    rec.setdefault("history", []).append(
+    _add_attempt(
+        rec,
         {
             "started": rec["started"],
             "wall_s": round(wall, 1),
             "rc": rec.get("rc"),
             "code": rec.get("code"),
             **({"code_end": end} if "code_end" in rec else {}),
-        }
+        },
     )
     write_record(plan, cell, rec)
+
+
+def _add_attempt(rec: dict, attempt: dict) -> None:
+    """One place that appends an attempt and adds its time to the cell's (an untimed one adds none)."""
+    rec.setdefault("history", []).append(attempt)
+    rec["wall_s"] = round(float(rec.get("wall_s", 0.0)) + (attempt["wall_s"] or 0.0), 1)
 
 
 # ----- redo ------------------------------------------------------------------------------------------
