@@ -12,30 +12,53 @@ memory, noise, failures.
 """
 
 import hashlib
+import json
 import shutil
 import sys
 from pathlib import Path
 
 ROOT = Path("/work/runs/exp36c/cpu")
 HERE = Path(__file__).resolve().parent / "cpu"
+MAX_CHECKPOINT = 60 << 20  # bytes; DAgger's checkpoint holds its aggregated data (~150 MB)
 SKIP_TOP = {"data", "locks", "reports", ".file_hashes.json"}
 
 
+def state(src: Path, kind: str, name: str) -> str:
+    try:
+        return json.loads((src / "cells" / f"{kind}-{name}.json").read_text())["state"]
+    except (OSError, ValueError, KeyError):
+        return "none"
+
+
+def resumable(run: Path) -> bool:
+    ckpt = run / "checkpoint.pt"
+    return ckpt.is_file() and ckpt.stat().st_size <= MAX_CHECKPOINT
+
+
+def keep(src: Path, rel: Path) -> bool:
+    """A cell still running is left out (record and folder: it restarts); stop the chain with SIGINT first."""
+    p = src / rel
+    if rel.parts[0] in SKIP_TOP or ".old-" in str(rel) or p.name == ".lock":
+        return False
+    if rel.parts[0] == "cells":
+        kind, name = rel.stem.split("-", 1)
+        return state(src, kind, name) != "running"
+    if rel.parts[0] not in ("train", "eval") or len(rel.parts) < 3:
+        return True
+    st = state(src, rel.parts[0], rel.parts[1])
+    if st == "running":
+        return False
+    if rel.parts[0] == "eval":
+        return True
+    if st == "done":
+        return p.suffix != ".pt" or p.name == "policy.pt"  # others read its policy, not its checkpoints
+    if not resumable(src / "train" / rel.parts[1]):
+        return False  # it restarts from scratch (DAgger's checkpoint, with its data, is too large to keep)
+    return p.suffix != ".pt" or p.name == "checkpoint.pt"  # it resumes from its last checkpoint
+
+
 def wanted(src: Path) -> list[Path]:
-    out = []
-    for p in sorted(src.rglob("*")):
-        rel = p.relative_to(src)
-        if not p.is_file() or rel.parts[0] in SKIP_TOP or ".old-" in str(rel) or p.name == ".lock":
-            continue
-        if rel.parts[0] == "train":
-            run = src / rel.parts[0] / rel.parts[1]
-            finished = (run / "policy.pt").is_file()
-            if finished and p.name != "policy.pt" and p.suffix == ".pt":
-                continue  # checkpoints of a finished training: its policy is what others read
-            if not finished and p.suffix == ".pt" and p.name != "checkpoint.pt":
-                continue  # older checkpoints of an interrupted one: the last is enough to resume
-        out.append(rel)
-    return out
+    return [p.relative_to(src) for p in sorted(src.rglob("*")) if p.is_file() and keep(src, p.relative_to(src))]
 
 
 def copy(src: Path, dst: Path) -> None:
