@@ -227,3 +227,20 @@ def test_cli_evaluate_report_and_video(tiny_dataset, tiny_scenes, tmp_path, caps
     n_frames = sum(1 for _ in imageio.get_reader(tmp_path / "ep.mp4"))
     assert n_frames >= ep["steps"] + 1
     assert ovon(["video", "--run", str(run), "--episode", "no-such", "--out", str(tmp_path / "x.mp4")]) == 2
+
+
+def test_seeds_that_ran_the_same_episodes_to_the_same_ends_are_flagged():
+    """A deterministic agent without noise repeats one run per seed: its std over seeds (0) is flagged, so
+    that a report does not read it as precision."""
+    from ovon.evaluate.results import summarize
+
+    def rec(seed: int, ep: str, success: bool, steps: int = 40) -> dict:
+        return {"split": "val_seen", "scene": "s", "episode_id": ep, "seed": seed, "success": success,
+                "spl": 0.5 * success, "soft_spl": 0.5, "distance_to_goal": 1.0, "steps": steps,
+                "collisions": 0, "failure": None if success else "timeout"}  # fmt: skip
+
+    same = [rec(seed, ep, ep == "1") for seed in (0, 1) for ep in ("1", "2")]
+    assert summarize(same)["val_seen"]["seeds_identical"] is True
+    assert summarize(same[:2])["val_seen"]["seeds_identical"] is False  # one seed: nothing to compare
+    other = same[:3] + [rec(1, "2", False, steps=41)]  # same outcome, another path
+    assert summarize(other)["val_seen"]["seeds_identical"] is False

@@ -30,7 +30,7 @@ from ovon.experiments import (
     write_experiment_report,
 )
 from ovon.experiments.plan import train_spec
-from ovon.experiments.report import experiment_results, wall_text
+from ovon.experiments.report import experiment_results, table_markdown, wall_text
 from ovon.experiments.runner import killed_wall_s
 from ovon.experiments.select import DATA
 
@@ -747,3 +747,15 @@ def test_a_killed_attempt_without_a_time_is_named_beside_the_wall_time(tmp_path:
     assert killed_wall_s(None, log) is None and killed_wall_s("garbage", log) is None
     later = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(log.stat().st_mtime + 3600))
     assert killed_wall_s(later, log) is None
+
+
+def test_table_marks_entries_whose_seeds_repeat_one_run() -> None:
+    from ovon.experiments.findings import SAME_SEEDS, SAME_SEEDS_NOTE
+
+    ours = {"sr": (82.0, 0.0), "spl": (40.0, 0.0), "episodes": 400, "seeds": 4}
+    row = {"name": "VLFM", "setup": "oracle", "cells": {"val_seen": {"ours": ours, "paper": None, "eval": "vlfm"}}}
+    table = {"columns": ["val_seen"], "rows": [row]}
+    assert SAME_SEEDS not in "\n".join(table_markdown(table))
+    ours["seeds_identical"] = True
+    text = "\n".join(table_markdown(table))
+    assert f"**82.0 ± 0.0**{SAME_SEEDS} (paper –)" in text and SAME_SEEDS_NOTE in text

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from ovon.cli.main import main
+from ovon.experiments.findings import SAME_SEEDS, SAME_SEEDS_NOTE
 from ovon.experiments.headline import BEGIN, END, HeadlineError, headline, replace_block
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,6 +67,14 @@ def test_tables_show_unfinished_cells_upper_bounds_and_verdicts(tmp_path: Path) 
     _report(tmp_path, None, name="main-oracle", verdict="does not hold")  # the oracle run kept beside it
     assert "| (g) | DAgRL beats DAgger | holds | **not run** | does not hold |" in headline(tmp_path)
     assert "[full report](r/main/report.md)" in text and "4 evaluation seeds" in text
+    assert SAME_SEEDS not in text  # reports written before seeds were compared carry no mark
+
+
+def test_seeds_that_ran_the_same_episodes_are_marked(tmp_path: Path) -> None:
+    _report(tmp_path, {"sr": [30.0, 0.0], "spl": [10.0, 0.0], "seeds": 4, "seeds_identical": True})
+    text = headline(tmp_path)
+    assert f"| **30.0** ± 0.0{SAME_SEEDS} (41.3) |" in text
+    assert SAME_SEEDS_NOTE in text and "| **80.0** ± 0.0 |" in text
 
 
 def test_write_then_check_and_clear_errors(tmp_path: Path) -> None:

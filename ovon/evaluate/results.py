@@ -238,8 +238,21 @@ def summarize(records: list[dict]) -> dict:
                     failures[r["failure"] or "unknown"] += 1
         entry["failures"] = dict(sorted(failures.items()))
         entry["episodes"] = sum(len(rs) for rs in seeds.values())
+        entry["seeds_identical"] = seeds_identical(seeds)
         out[split] = entry
     return out
+
+
+def seeds_identical(seeds: dict[int, list[dict]]) -> bool:
+    """Whether every seed ran the same episodes to the same ends (a deterministic agent in a run without
+    noise): the std over such seeds is 0 by construction and is no measure of uncertainty."""
+    if len(seeds) < 2:
+        return False
+    ends = {
+        tuple((r["scene"], str(r["episode_id"]), bool(r["success"]), r["steps"], r["spl"]) for r in rs)
+        for rs in seeds.values()
+    }
+    return len(ends) == 1
 
 
 def coverage_lines(splits: dict[str, dict]) -> list[str]:

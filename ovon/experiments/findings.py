@@ -21,6 +21,12 @@ PAIRED_NOTE = (
     "a comparison holds when its interval excludes 0 in the claimed direction"
 )
 
+SAME_SEEDS = "‡"
+SAME_SEEDS_NOTE = (
+    f"{SAME_SEEDS} every evaluation seed ran each episode to the same end (a deterministic agent, no noise): "
+    "its ± 0.0 is one run repeated, not a measure of uncertainty; the paired intervals are over episodes"
+)
+
 RULE_NOTE = (
     "means over evaluation seeds, in % points; 'within noise' where a deciding gap is smaller than the sum "
     "of the two standard deviations"

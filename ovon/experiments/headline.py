@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 from ovon.experiments.definitions import experiment_names
+from ovon.experiments.findings import SAME_SEEDS, SAME_SEEDS_NOTE
 from ovon.experiments.provenance import headline as provenance_line
 
 BEGIN = "<!-- ovon:headline (generated from experiments/results by `ovon experiment headline`; do not edit) -->"
@@ -39,7 +40,8 @@ def _load(results: Path, name: str, folder: str = "") -> dict:
 def _entry(cell: dict) -> str:
     ours = cell.get("ours")
     paper = cell.get("paper")
-    text = "not run" if ours is None else f"**{ours['sr'][0]:.1f}** ± {ours['sr'][1]:.1f}"
+    same = SAME_SEEDS if ours and ours.get("seeds_identical") else ""
+    text = "not run" if ours is None else f"**{ours['sr'][0]:.1f}** ± {ours['sr'][1]:.1f}{same}"
     return text + (f" ({paper['sr']:.1f})" if paper else "")
 
 
@@ -63,6 +65,8 @@ def table(results: Path, name: str, link: str) -> list[str]:
     ]
     for row in tab["rows"]:
         lines.append(f"| {row['name']} | {row['setup']} | " + " | ".join(_entry(row["cells"][c]) for c in cols) + " |")
+    if any((c.get("ours") or {}).get("seeds_identical") for r in tab["rows"] for c in r["cells"].values()):
+        lines += ["", SAME_SEEDS_NOTE + "."]
     return lines
 
 

@@ -18,7 +18,7 @@ from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, Finding, paper_numbers, parse_ref, row_eval
-from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, judge
+from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, SAME_SEEDS, SAME_SEEDS_NOTE, judge
 from ovon.experiments.outputs import last_update
 from ovon.experiments.plan import PERCEPTION
 from ovon.experiments.provenance import (
@@ -169,6 +169,7 @@ def experiment_results(exp: Experiment, evals: dict[str, dict], scale: str) -> d
                     ours = {m: _pct(summ, m) for m in ("sr", "spl")}
                     ours["episodes"] = summ["episodes"]
                     ours["seeds"] = len(summ["seeds"])
+                    ours["seeds_identical"] = bool(summ.get("seeds_identical"))
                 entry = {
                     "eval": name,
                     "split": col.split,
@@ -352,7 +353,7 @@ def table_markdown(table: dict) -> list[str]:
                     cells.append(f"not run (paper {paper})")
                     notes.setdefault(e["eval"], e["status"])
                 else:
-                    mark = MARK if e.get("marked") else ""
+                    mark = (MARK if e.get("marked") else "") + (SAME_SEEDS if e["ours"].get("seeds_identical") else "")
                     cells.append(f"**{fmt(e['ours'][m])}**{mark} (paper {paper})")
         lines.append(f"| {row['name']} | {row['setup']} | " + " | ".join(cells) + " |")
     if notes:
@@ -364,6 +365,8 @@ def table_markdown(table: dict) -> list[str]:
             f"{MARK} its evaluation, or a cell it needs, ran with another commit than most cells or from a "
             'dirty tree (table "Provenance").',
         ]
+    if any(e["ours"] and e["ours"].get("seeds_identical") for r in table["rows"] for e in r["cells"].values()):
+        lines += ["", SAME_SEEDS_NOTE + "."]
     counts = {
         (e["ours"]["episodes"], e["ours"]["seeds"]) for r in table["rows"] for e in r["cells"].values() if e["ours"]
     }
