@@ -3,24 +3,28 @@
     python experiments/pending/exp36c/sync.py save     # run root -> experiments/pending/exp36c/cpu (then commit)
     python experiments/pending/exp36c/sync.py restore  # experiments/pending/exp36c/cpu -> run root
 
-Saved: every cell's record and log, finished trainings' policy and curves, the interrupted training's last
-checkpoint, evaluations' episodes and summaries. Not saved: the data (the chain regenerates it from its seed;
-`episodes.sha256` checks it is byte-identical), locks, reports, caches and finished trainings' checkpoints.
-The chain: `git worktree add --detach /work/runs/wt36c 683b65f`, then in it
-`python -m ovon.cli.main experiment run NAME --scale cpu --root /work/runs/exp36c` for main, trajectories,
-memory, noise, failures.
+Saved: every cell's record and log, the episodes (with their goal cache, which records timings and so is
+not byte-identical when regenerated: the cells' input fingerprints cover it), finished trainings' policy and
+curves, an interrupted training's last checkpoint when it is small enough, evaluations' episodes and
+summaries. Not saved: cells still running (stop the chain with stop.sh first), the scenes (restore
+regenerates them byte-identical from their seed), locks, reports and finished trainings' checkpoints.
+Restore on a new machine: `make install`, `git worktree add --detach /work/runs/wt36c 683b65f`, then
+`sync.py restore`, then run the chain: in the worktree, `python -m ovon.cli.main experiment run NAME --scale
+cpu --root /work/runs/exp36c` for main, trajectories, memory, noise, failures (two runners, the second with
+`--no-wait`).
 """
 
-import hashlib
 import json
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
 ROOT = Path("/work/runs/exp36c/cpu")
+WORKTREE = Path("/work/runs/wt36c")  # the pinned commit, 683b65f
 HERE = Path(__file__).resolve().parent / "cpu"
 MAX_CHECKPOINT = 60 << 20  # bytes; DAgger's checkpoint holds its aggregated data (~150 MB)
-SKIP_TOP = {"data", "locks", "reports", ".file_hashes.json"}
+SKIP_TOP = {"locks", "reports", ".file_hashes.json"}
 
 
 def state(src: Path, kind: str, name: str) -> str:
@@ -40,6 +44,8 @@ def keep(src: Path, rel: Path) -> bool:
     p = src / rel
     if rel.parts[0] in SKIP_TOP or ".old-" in str(rel) or p.name == ".lock":
         return False
+    if rel.parts[0] == "data":  # the episodes as they are (their goal cache records timings); scenes regenerate
+        return len(rel.parts) > 2 and rel.parts[1] == "episodes"
     if rel.parts[0] == "cells":
         kind, name = rel.stem.split("-", 1)
         return state(src, kind, name) != "running"
@@ -74,27 +80,26 @@ def copy(src: Path, dst: Path) -> None:
     if dst == HERE:
         for p in sorted(dst.rglob("*"), reverse=True):
             rel = p.relative_to(dst)
-            if p.is_file() and rel not in keep and rel.name != "episodes.sha256":
+            if p.is_file() and rel not in keep:
                 p.unlink()
 
 
-def episodes_hashes(root: Path) -> str:
-    eps = root / "data" / "episodes"
-    files = sorted(eps.rglob("*.json.gz"))
-    return "".join(f"{hashlib.sha256(p.read_bytes()).hexdigest()}  {p.relative_to(eps)}\n" for p in files)
+def scenes() -> None:
+    """The scenes regenerate byte-identical from their seed (checked); the episodes' goal cache does not,
+    so the episodes are kept as files and only the data cell's `scenes generate` commands run again."""
+    cmds = json.loads((ROOT / "cells" / "data-data.json").read_text())["commands"]
+    for cmd in cmds:
+        if cmd.startswith("ovon scenes generate"):
+            argv = cmd.replace("$ROOT", str(ROOT.parent)).split()[1:]
+            subprocess.run([sys.executable, "-m", "ovon.cli.main", *argv], check=True, cwd=WORKTREE)
 
 
 if __name__ == "__main__":
     what = sys.argv[1] if len(sys.argv) > 1 else ""
     if what == "save":
         copy(ROOT, HERE)
-        (HERE / "episodes.sha256").write_text(episodes_hashes(ROOT))
     elif what == "restore":
         copy(HERE, ROOT)
-        (ROOT / "episodes.sha256").unlink(missing_ok=True)
-    elif what == "check":  # after the chain regenerated the data
-        same = (HERE / "episodes.sha256").read_text() == episodes_hashes(ROOT)
-        print("episodes identical" if same else "EPISODES DIFFER: the saved cells read other data")
-        sys.exit(0 if same else 1)
+        scenes()
     else:
-        sys.exit("usage: sync.py save|restore|check")
+        sys.exit("usage: sync.py save|restore")
