@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Stop issue 36's chain gracefully (each training child writes its checkpoint first), then save it for a commit.
-pkill -KILL -f chain36c.sh; pkill -KILL -f chain36c2.sh
+pkill -KILL -f "chain36c|bash -c run"
 for P in $(pgrep -f "ovon.cli.main experiment run"); do
   kill -INT -- -"$(ps -o pgid= -p "$P" | tr -d ' ')" 2>/dev/null
 done

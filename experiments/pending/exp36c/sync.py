@@ -8,10 +8,8 @@ not byte-identical when regenerated: the cells' input fingerprints cover it), fi
 curves, an interrupted training's last checkpoint when it is small enough, evaluations' episodes and
 summaries. Not saved: cells still running (stop the chain with stop.sh first), the scenes (restore
 regenerates them byte-identical from their seed), locks, reports and finished trainings' checkpoints.
-Restore on a new machine: `make install`, `git worktree add --detach /work/runs/wt36c 683b65f`, then
-`sync.py restore`, then run the chain: in the worktree, `python -m ovon.cli.main experiment run NAME --scale
-cpu --root /work/runs/exp36c` for main, trajectories, memory, noise, failures (two runners, the second with
-`--no-wait`).
+Restore on a new machine: `make install`, `git worktree add --detach /work/runs/wt36c 683b65f`,
+`sync.py restore`, then `chain.sh` (two runners on the root; `stop.sh` stops them and saves).
 """
 
 import json
