@@ -27,6 +27,13 @@ SAME_SEEDS_NOTE = (
     "its ± 0.0 is one run repeated, not a measure of uncertainty; the paired intervals are over episodes"
 )
 
+
+def same_seeds_lines(rows: list[dict]) -> list[str]:
+    """The note under a table (a blank line, then the note) when any of its entries is marked SAME_SEEDS."""
+    marked = any((c.get("ours") or {}).get("seeds_identical") for r in rows for c in r["cells"].values())
+    return ["", SAME_SEEDS_NOTE + "."] if marked else []
+
+
 RULE_NOTE = (
     "means over evaluation seeds, in % points; 'within noise' where a deciding gap is smaller than the sum "
     "of the two standard deviations"

@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from ovon.experiments.definitions import experiment_names
-from ovon.experiments.findings import SAME_SEEDS, SAME_SEEDS_NOTE
+from ovon.experiments.findings import SAME_SEEDS, same_seeds_lines
 from ovon.experiments.provenance import headline as provenance_line
 
 BEGIN = "<!-- ovon:headline (generated from experiments/results by `ovon experiment headline`; do not edit) -->"
@@ -65,9 +65,7 @@ def table(results: Path, name: str, link: str) -> list[str]:
     ]
     for row in tab["rows"]:
         lines.append(f"| {row['name']} | {row['setup']} | " + " | ".join(_entry(row["cells"][c]) for c in cols) + " |")
-    if any((c.get("ours") or {}).get("seeds_identical") for r in tab["rows"] for c in r["cells"].values()):
-        lines += ["", SAME_SEEDS_NOTE + "."]
-    return lines
+    return lines + same_seeds_lines(tab["rows"])
 
 
 def _verdict(found: dict | None) -> str:

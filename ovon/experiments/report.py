@@ -18,7 +18,7 @@ from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, Finding, paper_numbers, parse_ref, row_eval
-from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, SAME_SEEDS, SAME_SEEDS_NOTE, judge
+from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, SAME_SEEDS, judge, same_seeds_lines
 from ovon.experiments.outputs import last_update
 from ovon.experiments.plan import PERCEPTION
 from ovon.experiments.provenance import (
@@ -365,8 +365,7 @@ def table_markdown(table: dict) -> list[str]:
             f"{MARK} its evaluation, or a cell it needs, ran with another commit than most cells or from a "
             'dirty tree (table "Provenance").',
         ]
-    if any(e["ours"] and e["ours"].get("seeds_identical") for r in table["rows"] for e in r["cells"].values()):
-        lines += ["", SAME_SEEDS_NOTE + "."]
+    lines += same_seeds_lines(table["rows"])
     counts = {
         (e["ours"]["episodes"], e["ours"]["seeds"]) for r in table["rows"] for e in r["cells"].values() if e["ours"]
     }
