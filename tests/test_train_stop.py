@@ -51,3 +51,37 @@ def test_disarm_without_a_request_restores_the_previous_handlers(saved_handlers)
     assert signal.getsignal(signal.SIGTERM) != mine
     stop.disarm()
     assert signal.getsignal(signal.SIGTERM) is mine and not stop.requested
+
+
+def test_second_ctrl_c_while_a_checkpoint_is_written_stops_once_it_is_in_place(saved_handlers, capsys, tmp_path):
+    # a KeyboardInterrupt inside torch.save leaves torch's zip writer raising a RuntimeError ("unexpected pos"),
+    # reported as a bug and losing the stop's checkpoint: the second Ctrl-C waits for the file instead
+    import torch
+
+    from ovon.train.checkpoint import atomic_torch_save
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    stop = StopRequest()
+    stop.arm()
+    _deliver(signal.SIGTERM)
+    path = tmp_path / "checkpoint.pt"
+    with pytest.raises(KeyboardInterrupt):
+        with stop.writing():
+            _deliver(signal.SIGINT)
+            _deliver(signal.SIGINT)  # a third: still one message, still waits
+            atomic_torch_save({"w": torch.arange(4)}, path)
+            written = True
+    assert written and torch.load(path)["w"].tolist() == [0, 1, 2, 3]
+    assert capsys.readouterr().err.count("stopping once the checkpoint being written is in place") == 1
+    with pytest.raises(KeyboardInterrupt):  # outside a write, a Ctrl-C stops at once again
+        _deliver(signal.SIGINT)
+    stop.disarm()
+
+
+def test_a_write_without_a_stop_request_passes_through(saved_handlers):
+    stop = StopRequest()
+    stop.arm()
+    with stop.writing():
+        pass
+    assert not stop.requested
+    stop.disarm()

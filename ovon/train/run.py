@@ -195,28 +195,29 @@ class TrainRun:
         # on the CPU first: a CUDA tensor unpickled by another rank would land on this rank's GPU
         ranks = dist.gather_objects(to_device({**rank_state, "rng": rng_state()}, "cpu"), self.info)
         if self.is_main:
-            cfg = self.cfg
-            save_checkpoint(
-                self.out,
-                {
-                    "algo": self.algo,
-                    "config": to_dict(cfg),
-                    "policy": self.policy.state_dict(),
-                    "optimizer": optimizer.state_dict(),
-                    "update": update,
-                    "step": self.step,
-                    "world_size": self.info.world_size,
-                    "ranks": ranks,
-                    "extra": {},
-                },
-            )
-            export_policy(
-                self.policy,
-                self.out,
-                policy_extra(cfg, self.algo, update, self.step, self.policy),
-                update,
-                cfg.keep_checkpoints,
-            )
+            with self.stop.writing():  # a second Ctrl-C here waits for the files to be in place
+                cfg = self.cfg
+                save_checkpoint(
+                    self.out,
+                    {
+                        "algo": self.algo,
+                        "config": to_dict(cfg),
+                        "policy": self.policy.state_dict(),
+                        "optimizer": optimizer.state_dict(),
+                        "update": update,
+                        "step": self.step,
+                        "world_size": self.info.world_size,
+                        "ranks": ranks,
+                        "extra": {},
+                    },
+                )
+                export_policy(
+                    self.policy,
+                    self.out,
+                    policy_extra(cfg, self.algo, update, self.step, self.policy),
+                    update,
+                    cfg.keep_checkpoints,
+                )
         dist.barrier(self.info)
 
     def due(self, update: int, total: int, every: int) -> bool:

@@ -5,14 +5,19 @@ child) ends `ovon train` at once and the updates since the last scheduled checkp
 `checkpoint_every`, minutes at cpu scale) are lost. With it, the first Ctrl-C or SIGTERM lets the
 current update finish, writes a checkpoint of it and exits as an interrupt (exit 130), so `--resume`
 continues from the update where it stopped, to the weights of an uninterrupted run. A second Ctrl-C
-stops at once (the last scheduled checkpoint stands); further SIGTERMs are ignored (a process group's
-stop followed by the runner's own must not cut the checkpoint short).
+stops at once (the last scheduled checkpoint stands), except while a checkpoint is being written
+(`writing()`): then it stops as soon as the file is in place, since a KeyboardInterrupt inside
+`torch.save` surfaces as torch's zip-writer RuntimeError, reported as a bug, and throws away the
+checkpoint that makes the resume lose nothing. Further SIGTERMs are ignored (a process group's stop
+followed by the runner's own must not cut the checkpoint short).
 """
 
 from __future__ import annotations
 
 import signal
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -25,6 +30,8 @@ class StopRequest:
     def __init__(self) -> None:
         self.requested = False
         self._previous: dict[int, Any] = {}
+        self._writing = False
+        self._stop_now = False
 
     def arm(self) -> None:
         try:
@@ -35,8 +42,13 @@ class StopRequest:
 
     def _handle(self, signum: int, frame) -> None:
         if self.requested:
-            if signum == signal.SIGINT:  # a second Ctrl-C: stop now
+            if signum != signal.SIGINT:
+                return
+            if not self._writing:  # a second Ctrl-C: stop now
                 raise KeyboardInterrupt
+            if not self._stop_now:
+                self._stop_now = True
+                print("ovon: stopping once the checkpoint being written is in place", file=sys.stderr, flush=True)
             return
         self.requested = True
         print(
@@ -44,6 +56,17 @@ class StopRequest:
             file=sys.stderr,
             flush=True,
         )
+
+    @contextmanager
+    def writing(self) -> Iterator[None]:
+        """Hold a second Ctrl-C while a checkpoint is written; it stops the run once the file is in place."""
+        self._writing = True
+        try:
+            yield
+        finally:
+            self._writing = False
+        if self._stop_now:
+            raise KeyboardInterrupt
 
     def disarm(self) -> None:
         if not self._previous:
