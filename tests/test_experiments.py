@@ -233,6 +233,14 @@ def test_missing_paper_numbers_and_bad_references_are_refused(tmp_path: Path) ->
     why = ok + "findings: [{id: z, claim: c, differs: {huge: s}, checks: [{kind: best, target: DAgRL @ v}]}]\n"
     with pytest.raises(DefinitionError, match="finding z: differs.huge = 's'; expected a scale of scales.yaml"):
         resolve([load_experiment(str(_write(tmp_path / "e.yaml", why)))], "cpu", tmp_path)
+    quoted = why.replace("differs: {huge: s}", "differs: {cpu: 'at {DAgRL @ v - BC @ v}'}")
+    with pytest.raises(DefinitionError, match=r"quotes \{DAgRL @ v - BC @ v\}, but 'BC @ v' is not a table"):
+        resolve([load_experiment(str(_write(tmp_path / "f.yaml", quoted)))], "cpu", tmp_path)
+    with pytest.raises(DefinitionError, match="reference 'DAgRL v' is not 'ROW @ COLUMN'"):
+        unparsed = why.replace("differs: {huge: s}", "differs: {cpu: 'at {DAgRL v - DAgRL @ v}'}")
+        resolve([load_experiment(str(_write(tmp_path / "g.yaml", unparsed)))], "cpu", tmp_path)
+    fine = margin.replace("id: z,", "id: z, differs: {cpu: 'at {DAgRL @ v} and {x}'},").replace("margin: 5, ", "")
+    resolve([load_experiment(str(_write(tmp_path / "h.yaml", fine)))], "cpu", tmp_path)  # braces without '@' stay
     with pytest.raises(DefinitionError, match="unknown scale 'huge'"):
         resolve([load_experiment("main")], "huge", tmp_path)
     with pytest.raises(DefinitionError, match="seeds"):
@@ -732,6 +740,18 @@ def test_a_verdict_that_differs_from_the_papers_carries_its_reason_or_says_it_ha
     assert "differs" not in finding_result(f, missing, holds, "cpu", "x.yaml")  # not judged yet
     text = "\n".join(findings_markdown([finding_result(f, fails, holds, "cpu", "x.yaml")]))
     assert "here **does not hold**; paper: holds." in text and "why it differs from the paper's: S." in text
+
+
+def test_a_why_sentence_quotes_this_runs_numbers_not_copies() -> None:
+    from ovon.experiments.findings import fill_sentence
+
+    values = {"A @ v": (15.04, 1.2), "B @ v": (10.2, 2.4), "C @ v": None}
+    look = values.get
+    text = "A {A @ v} vs B {B @ v}: {A @ v - B @ v}; C {C @ v}, {C @ v - A @ v}; {kept} {{"
+    assert fill_sentence(text, lambda r, m: look(r)) == "A 15.0 vs B 10.2: +4.8; C (not run), (not run); {kept} {{"
+    paired = {"diff": 4.8, "ci_low": 0.5, "ci_high": 9.0, "p": 0.03}
+    filled = fill_sentence("{A @ v - B @ v}", lambda r, m: look(r), lambda a, b, m: paired if a == "A @ v" else None)
+    assert filled == "+4.8 [+0.5, +9.0]"  # paired where the two ran the same episodes
 
 
 def test_a_killed_attempt_without_a_time_is_named_beside_the_wall_time(tmp_path: Path) -> None:

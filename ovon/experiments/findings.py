@@ -7,9 +7,10 @@ seeds in % points; a verdict is "within noise" when a deciding gap is smaller th
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 
-from ovon.experiments.definitions import Check, Finding
+from ovon.experiments.definitions import Check, Finding, parse_ref
 
 Value = tuple[float, float]  # (mean, std) in %
 Lookup = Callable[[str, str], Value | None]  # (ref, metric) -> value, None when not run
@@ -88,11 +89,51 @@ def paired_check(chk: Check, paired: Paired | None) -> dict | None:
     else:
         verdict = f"not shown (an interval includes {chk.margin:g})"
     sign = " (SR sign test p {p:.2g})" if chk.metric == "sr" else ""
-    numbers = "; ".join(
-        f"{a} - {b} {st['diff']:+.1f} [{st['ci_low']:+.1f}, {st['ci_high']:+.1f}]" + sign.format(p=st["p"])
-        for (a, b), st in zip(pairs, stats)
-    )
+    numbers = "; ".join(f"{a} - {b} {interval_text(st)}" + sign.format(p=st["p"]) for (a, b), st in zip(pairs, stats))
     return {"verdict": verdict, "numbers": numbers}
+
+
+def interval_text(st: dict) -> str:
+    """A paired difference as the reports print it: '+6.0 [+1.8, +10.5]'."""
+    return f"{st['diff']:+.1f} [{st['ci_low']:+.1f}, {st['ci_high']:+.1f}]"
+
+
+# `{ROW @ COLUMN}` or `{ROW @ COLUMN - ROW @ COLUMN}` in a finding's `differs` sentence
+_SENTENCE_REF = re.compile(r"\{([^{}]*@[^{}]*)\}")
+NOT_RUN = "(not run)"
+
+
+def sentence_refs(text: str, where: str) -> list[tuple[str, ...]]:
+    """The table references a `differs` sentence quotes, each as (ref,) or (ref a, ref b); raises
+    DefinitionError (naming `where`) on one that is not 'ROW @ COLUMN'."""
+    out = []
+    for m in _SENTENCE_REF.finditer(text):
+        parts = tuple(x.strip() for x in m.group(1).split(" - "))
+        if len(parts) > 2:
+            parts = (m.group(1),)  # not 'A - B': parse_ref names it
+        for ref in parts:
+            parse_ref(ref, where)
+        out.append(parts)
+    return out
+
+
+def fill_sentence(text: str, look: Lookup, paired: Paired | None = None) -> str:
+    """A `differs` sentence with its quoted table values filled in from this run, so that the why never
+    copies a result by hand: `{DAgRL @ val_seen}` -> '15.0' (SR), `{A @ c - B @ c}` -> the paired difference
+    with its interval ('+4.8 [+0.5, +9.0]'), or the plain difference where the two cannot be paired."""
+
+    def value(m: re.Match) -> str:
+        parts = [x.strip() for x in m.group(1).split(" - ")]
+        if len(parts) == 1:
+            v = look(parts[0], "sr")
+            return NOT_RUN if v is None else f"{v[0]:.1f}"
+        st = paired(parts[0], parts[1], "sr") if paired is not None else None
+        if st is not None:
+            return interval_text(st)
+        a, b = look(parts[0], "sr"), look(parts[1], "sr")
+        return NOT_RUN if a is None or b is None else f"{a[0] - b[0]:+.1f}"
+
+    return _SENTENCE_REF.sub(value, text)
 
 
 def judge_check(chk: Check, look: Lookup, paired: Paired | None = None) -> dict:

@@ -34,6 +34,7 @@ from ovon.experiments.definitions import (
     parse_ref,
     row_eval,
 )
+from ovon.experiments.findings import sentence_refs
 from ovon.runfolder import flatten  # {"a": {"b": 1}, "c.d": 2} -> {"a.b": 1, "c.d": 2}: the one flattener
 from ovon.train.folder import EpisodeSource
 
@@ -459,6 +460,14 @@ def check_experiment(exp: Experiment, plan: Plan) -> None:
                     f"{w}: finding {f.id}: differs.{sc} = {why!r}; expected a scale of scales.yaml "
                     f"({', '.join(plan.catalogue.scales)}) -> one non-empty sentence"
                 )
+            for refs in sentence_refs(str(why), f"{w}: finding {f.id}: differs.{sc}"):
+                for ref in refs:
+                    if parse_ref(ref, w) not in entries:
+                        raise DefinitionError(
+                            f"{w}: finding {f.id}: differs.{sc} quotes {{{' - '.join(refs)}}}, but {ref!r} is not "
+                            "a table entry; expected {ROW @ COLUMN} or {ROW @ COLUMN - ROW @ COLUMN} with a row "
+                            "and a column of this experiment's table"
+                        )
         for chk in f.checks:
             for ref in check_refs(chk):
                 if parse_ref(ref, f"{w}: finding {f.id}") not in entries:

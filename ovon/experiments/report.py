@@ -11,6 +11,7 @@ for a dataset outside it, `$EPISODES` / `$SCENES`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, Finding, paper_numbers, parse_ref, row_eval
-from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, SAME_SEEDS, judge, same_seeds_lines
+from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, SAME_SEEDS, fill_sentence, judge, same_seeds_lines
 from ovon.experiments.outputs import last_update
 from ovon.experiments.plan import PERCEPTION
 from ovon.experiments.provenance import (
@@ -232,20 +233,26 @@ def experiment_results(exp: Experiment, evals: dict[str, dict], scale: str) -> d
             evals, entries[parse_ref(ref_a, exp.source)], entries[parse_ref(ref_b, exp.source)], metric
         )
 
+    def fill(text: str) -> str:
+        return fill_sentence(text, look("ours"), paired)
+
     res["findings"] = [
-        finding_result(f, judge(f, look("ours"), paired), judge(f, look("paper")), scale, exp.source)
+        finding_result(f, judge(f, look("ours"), paired), judge(f, look("paper")), scale, exp.source, fill)
         for f in exp.findings
     ]
     return res
 
 
-def finding_result(f: Finding, ours: dict, paper: dict, scale: str, source: str) -> dict:
+def finding_result(
+    f: Finding, ours: dict, paper: dict, scale: str, source: str, fill: Callable[[str], str] = str
+) -> dict:
     """A judged finding; where our verdict and the paper's differ (both judged), `differs` holds the
-    definition's sentence for `scale`, or says where to write one (a difference is never left silent)."""
+    definition's sentence for `scale` with its quoted table values filled in (`fill_sentence`), or says
+    where to write one (a difference is never left silent)."""
     out = {"id": f.id, "claim": f.claim, "note": f.note, "ours": ours, "paper": paper}
     judged = "not run" not in (ours["verdict"], paper["verdict"])
     if judged and ours["verdict"] != paper["verdict"]:
-        out["differs"] = f.differs.get(scale) or (
+        out["differs"] = fill(f.differs.get(scale, "")) or (
             f"not explained yet (fix: add `differs: {{{scale}: SENTENCE}}` to finding {f.id} in {source})"
         )
     return out
