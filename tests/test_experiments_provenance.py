@@ -302,8 +302,8 @@ def test_an_episode_file_edited_to_the_same_size_makes_finished_cells_stale(tmp_
     _done(plan, "eval:vlfm")
     _done(plan, "eval:vlfm-noise", inputs={"data": inputs(plan, plan.cells["eval:vlfm-noise"])["data"]})
     cache = plan.base / state.HASH_CACHE
-    assert cache.is_file() and len(json.loads(cache.read_text())) == len(list(data.rglob("*.json.gz")))
-    victim = sorted(data.rglob("*.json.gz"))[0]
+    assert cache.is_file() and len(json.loads(cache.read_text())) == len(state.episode_files(data))
+    victim = state.episode_files(data)[0]
     body = bytearray(victim.read_bytes())
     body[len(body) // 2] ^= 0xFF  # another byte, the same size
     victim.write_bytes(bytes(body))
@@ -320,6 +320,37 @@ def test_an_episode_file_edited_to_the_same_size_makes_finished_cells_stale(tmp_
     state._HASHES.clear()
     os.utime(victim, ns=(victim.stat().st_atime_ns, victim.stat().st_mtime_ns + 1))
     assert state.episodes_content_fingerprint(plan) != before  # a new mtime: read again
+
+
+def test_the_generators_hidden_cache_is_not_an_input_and_records_that_hashed_it_stay_done(
+    tmp_path, tiny_dataset, tiny_scenes
+) -> None:
+    """`dataset generate` keeps goal caches in `<episodes>/.cache/`: growing or deleting them makes nothing
+    stale. Records written while the fingerprints still hashed them compare by that older reckoning."""
+    from ovon.experiments import inputs as state
+
+    data = tmp_path / "episodes"
+    shutil.copytree(tiny_dataset, data)
+    hidden = data / ".cache" / "goals" / "another-scene.json.gz"  # beside the fixture's own cache
+    hidden.parent.mkdir(parents=True, exist_ok=True)
+    hidden.write_bytes(b"cache v1")
+    plan = _plan(tmp_path / "root", data, tiny_scenes)
+    legacy = {"data": state.data_fingerprint(plan, hidden=True)}
+    legacy["episodes"] = state.episodes_content_fingerprint(plan, hidden=True)
+    assert legacy["episodes"] != state.episodes_content_fingerprint(plan)
+    _done(plan, "eval:vlfm")
+    _done(plan, "eval:vlfm-noise", inputs={**inputs(plan, plan.cells["eval:vlfm-noise"]), **legacy})
+    for cid in ("eval:vlfm", "eval:vlfm-noise"):
+        assert cell_status(plan, plan.cells[cid], {}).state == "done"
+    hidden.write_bytes(b"cache v2, longer")  # the cache regrown: new cells are unaffected
+    assert cell_status(plan, plan.cells["eval:vlfm"], {}).state == "done"
+    st = cell_status(plan, plan.cells["eval:vlfm-noise"], {})  # an old record hashed the old cache
+    assert (st.state, st.detail) == ("changed", "its input(s) data, episodes changed since it ran")
+    shutil.rmtree(data / ".cache")
+    assert cell_status(plan, plan.cells["eval:vlfm"], {}).state == "done"
+    victim = state.episode_files(data)[0]  # a real episode file still counts
+    victim.write_bytes(victim.read_bytes() + b"\0")
+    assert cell_status(plan, plan.cells["eval:vlfm"], {}).state == "changed"
 
 
 def test_a_cell_whose_code_changed_while_it_ran_ran_with_both(tmp_path, monkeypatch) -> None:

@@ -50,12 +50,25 @@ def _read_hash_cache(path: Path) -> dict[str, list]:
     return data if ok else {}
 
 
-def episodes_content_fingerprint(plan: Plan) -> str | None:
+def episode_files(root: Path, hidden: bool = False) -> list[Path]:
+    """The episode files (`*.json.gz`) under `root`, sorted. Files under a hidden folder are left out
+    (`hidden=False`): `ovon dataset generate` keeps its goal cache in `<out>/.cache/`, which no episode
+    reader opens, so deleting or regrowing it must not make every cell that read the episodes stale."""
+    if not root.is_dir():
+        return []
+    files = (p for p in root.rglob("*.json.gz") if p.is_file())
+    if not hidden:
+        files = (p for p in files if not any(part.startswith(".") for part in p.relative_to(root).parent.parts))
+    return sorted(files)
+
+
+def episodes_content_fingerprint(plan: Plan, hidden: bool = False) -> str | None:
     """Identity of the episode files by their content: an episode file edited to the same size (a changed
     goal, a moved start) makes what read it stale. Why cheap enough: each file is read once per size and
-    mtime; the hashes persist in the scale folder's `.file_hashes.json`, so a status pass stats the files."""
+    mtime; the hashes persist in the scale folder's `.file_hashes.json`, so a status pass stats the files.
+    `hidden=True`: as records written before `episode_files` left hidden folders out."""
     root = plan.episodes_dir
-    files = sorted(p for p in root.rglob("*.json.gz") if p.is_file()) if root.is_dir() else []
+    files = episode_files(root, hidden)
     if not files:
         return None
     cache_path = plan.base / HASH_CACHE
@@ -70,13 +83,11 @@ def episodes_content_fingerprint(plan: Plan) -> str | None:
     return h.hexdigest()
 
 
-def data_fingerprint(plan: Plan) -> str | None:
+def data_fingerprint(plan: Plan, hidden: bool = False) -> str | None:
     """Identity of the episode dataset: names and sizes of its episode files (cheap for any size)."""
     root = plan.episodes_dir
-    if not root.is_dir():
-        return None
     h = hashlib.sha256()
-    files = sorted(p for p in root.rglob("*.json.gz") if p.is_file())
+    files = episode_files(root, hidden)
     if not files:
         return None
     for p in files:
@@ -118,8 +129,13 @@ def inputs(plan: Plan, cell: Cell, dataset: dict | None = None) -> dict[str, Any
     return out
 
 
+# records written before the episode fingerprints left hidden folders out hold these values
+_WITH_HIDDEN = {"data": data_fingerprint, "episodes": episodes_content_fingerprint}
+
+
 def changed_inputs(plan: Plan, cell: Cell, rec: dict, dataset: dict | None = None) -> list[str]:
     """The inputs the record holds that differ now (records written before an input was recorded compare
     only what they hold)."""
     now = inputs(plan, cell, dataset)
-    return [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
+    moved = [k for k, v in (rec.get("inputs") or {}).items() if now.get(k) != v]
+    return [k for k in moved if not (k in _WITH_HIDDEN and _WITH_HIDDEN[k](plan, hidden=True) == rec["inputs"][k])]
