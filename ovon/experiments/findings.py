@@ -103,12 +103,17 @@ _SENTENCE_REF = re.compile(r"\{([^{}]*@[^{}]*)\}")
 NOT_RUN = "(not run)"
 
 
+def _quoted(m: re.Match) -> tuple[str, ...]:
+    """A quote's references: (ref,) or (ref a, ref b) for `{A - B}`."""
+    return tuple(x.strip() for x in m.group(1).split(" - "))
+
+
 def sentence_refs(text: str, where: str) -> list[tuple[str, ...]]:
     """The table references a `differs` sentence quotes, each as (ref,) or (ref a, ref b); raises
     DefinitionError (naming `where`) on one that is not 'ROW @ COLUMN'."""
     out = []
     for m in _SENTENCE_REF.finditer(text):
-        parts = tuple(x.strip() for x in m.group(1).split(" - "))
+        parts = _quoted(m)
         if len(parts) > 2:
             parts = (m.group(1),)  # not 'A - B': parse_ref names it
         for ref in parts:
@@ -123,7 +128,7 @@ def fill_sentence(text: str, look: Lookup, paired: Paired | None = None) -> str:
     with its interval ('+4.8 [+0.5, +9.0]'), or the plain difference where the two cannot be paired."""
 
     def value(m: re.Match) -> str:
-        parts = [x.strip() for x in m.group(1).split(" - ")]
+        parts = _quoted(m)
         if len(parts) == 1:
             v = look(parts[0], "sr")
             return NOT_RUN if v is None else f"{v[0]:.1f}"
