@@ -8,6 +8,7 @@ from pathlib import Path
 
 import matplotlib
 from matplotlib.figure import Figure
+from matplotlib.ticker import EngFormatter, MaxNLocator
 
 # Curves worth a panel: imitation (BC, DAgger) and PPO runs log different scalars.
 IL_KEYS = ("episode/success", "episode/spl", "loss", "accuracy", "beta")
@@ -124,6 +125,9 @@ def training_curve(name: str, folder: Path, out: Path) -> Path | None:
         ax.plot(xs, smooth, lw=1.4, color="C0")
         ax.set_title(key, fontsize=9)
         ax.set_xlabel("env steps", fontsize=8)
+        # 300k-step runs in 3-inch panels: plain tick labels (100000150000...) run into each other
+        ax.xaxis.set_major_locator(MaxNLocator(4))
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))
         ax.tick_params(labelsize=7)
     fig.suptitle(f"training: {name}", fontsize=10, y=1.02)
     fig.tight_layout()
