@@ -31,7 +31,8 @@ class PolicyAgentArgs:
     deterministic: bool = True
     device: str = constrained("cpu", Pattern(r"cpu|cuda(:[0-9]+)?|mps", "cpu, cuda, cuda:N or mps"))
     threads: int = non_negative(1)  # 0: leave torch's default
-    temperature: float = positive(1.0)
+    # None: the temperature the checkpoint says the policy acted at in training (1 for checkpoints without it)
+    temperature: float | None = positive(None)
 
 
 class PolicyAgent:
@@ -41,11 +42,13 @@ class PolicyAgent:
         deterministic: bool = True,
         device: str | torch.device = "cpu",
         threads: int = 1,
-        temperature: float = 1.0,
+        temperature: float | None = None,
     ) -> None:
         """`deterministic`: argmax actions; else sample from softmax(logits / temperature) with a generator
         seeded per episode (reproducible). Argmax can lock an imitation policy into a turn-left /
-        turn-right cycle; sampling breaks it, and a temperature < 1 keeps rare actions (STOP) rare."""
+        turn-right cycle; sampling breaks it, and a temperature < 1 keeps rare actions (STOP) rare.
+        `temperature` None: the one the checkpoint records as its training's (`acting_temperature`), so a
+        PPO policy is scored at the temperature it was optimised at."""
         from ovon.models.config import EncoderConfig
         from ovon.models.encoders import TableTextEncoder
         from ovon.models.policy import ActorCritic
@@ -62,9 +65,9 @@ class PolicyAgent:
         self.policy = ActorCritic.load(path, map_location=device, flag="checkpoint").eval()
         self.device = torch.device(device)
         self.deterministic = deterministic
-        self.temperature = float(temperature)
         self.encoder_cfg = self.policy.encoder_cfg or EncoderConfig()
         extra = getattr(self.policy, "checkpoint_extra", {}) or {}
+        self.temperature = float(extra.get("acting_temperature", 1.0) if temperature is None else temperature)
         self.text = TableTextEncoder(extra.get("text_table", {}), self.encoder_cfg)
         self.image_encoder = None
         if self.encoder_cfg.image != "cnn":

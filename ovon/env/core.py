@@ -165,6 +165,18 @@ class ObjectNavEnv(gym.Env):
         self.spec_episode: EpisodeSpec | None = None
         self._has_episode = False  # False before the first reset and after a failed one
 
+    def set_task(self, task: TaskConfig) -> None:
+        """The task rules of the episodes started from now on (the one in progress keeps its own). Why: a
+        training schedule changes a rule mid-run (evaluation's STOP rule for the last part of training,
+        `ovon.env.sampler`); the observation layout must stay, so only rules may change."""
+        validate(task, "task")
+        if task.kind != self.task_cfg.kind or task.max_steps != self.task_cfg.max_steps:
+            raise ValueError(
+                f"set_task: kind {task.kind!r} / max_steps {task.max_steps} differ from this env's "
+                f"({self.task_cfg.kind!r} / {self.task_cfg.max_steps}); fix: build a new env for another task"
+            )
+        self.task_cfg = task
+
     # -- episode set-up -------------------------------------------------------------------------
     def _world_for(self, scene: str) -> World:
         if self._world is None or self._world.key != scene:

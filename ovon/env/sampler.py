@@ -8,9 +8,14 @@ bytes, and `set_state` replays the current episode to the same point through eve
 
 An optional start-distance curriculum (RL from scratch): an env's first episodes are the ones whose
 start is geodesically close to the goal (`info.geodesic_distance` of the dataset), where a random policy
-reaches the success region and can learn when to STOP; the cap grows linearly with the episodes the env
-has started, to every episode after `curriculum_episodes`. It counts per env, so it is the same whatever
-the number of workers, and the count is part of the resume state.
+reaches the success region and can learn when to STOP; the cap grows linearly to every episode, either
+with the trainer's update count (`set_update`, the same for every env: the curriculum ends when the
+schedule says) or with the episodes the env has started. Either count is the same whatever the number
+of workers, and both are part of the resume state.
+
+A training schedule of the task's STOP rule: from update `strict_stop_from` on (`set_update`), episodes
+start under evaluation's rule (a STOP outside the success region ends the episode) even when the task
+config says `failed_stop_ends` false. The rule is fixed per episode, at its start, and kept in the state.
 """
 
 from __future__ import annotations
@@ -37,13 +42,23 @@ class EpisodeSampler(gym.Wrapper):
         scene_repeat: int = 4,
         curriculum_start_m: float = 0.0,
         curriculum_episodes: int = 0,
+        curriculum_updates: int = 0,
+        strict_stop_from: int | None = None,
     ) -> None:
+        """`curriculum_updates` > 0: the cap counts the trainer's updates (`set_update`) instead of
+        `curriculum_episodes`. `strict_stop_from`: the update from which a failed STOP ends the episode
+        (None: the task config's rule throughout)."""
         super().__init__(env)
         if not episodes:
             raise ValueError("an episode sampler needs at least one episode")
         self.episodes = list(episodes)
-        self.curriculum = curriculum_start_m > 0 and curriculum_episodes > 0
+        self.curriculum_updates = max(0, int(curriculum_updates))
+        self.curriculum = curriculum_start_m > 0 and (curriculum_episodes > 0 or self.curriculum_updates > 0)
         self.curriculum_start_m, self.curriculum_episodes = float(curriculum_start_m), int(curriculum_episodes)
+        self.update = 0  # the trainer's update in progress (`set_update`)
+        self.strict_stop_from = strict_stop_from
+        self.base_task = getattr(env.unwrapped, "task_cfg", None)
+        self.strict_stop = False  # the current episode's rule (set at its start)
         self.distance = np.zeros(len(self.episodes))
         if self.curriculum:
             missing = [s.episode_id for s in self.episodes if "geodesic_distance" not in (s.info or {})]
@@ -69,12 +84,25 @@ class EpisodeSampler(gym.Wrapper):
         self.skipped = 0
 
     # -- sampling ---------------------------------------------------------------------------
+    def set_update(self, update: int) -> None:
+        """The trainer's update now starting (0-based): the curriculum's and the STOP rule's clock. Called
+        on every env at the same point of the run, so the schedule does not depend on the worker layout."""
+        self.update = int(update)
+
     def max_distance(self) -> float:
         """The curriculum's cap on the start distance (m) for the next episode (inf without one)."""
-        if not self.curriculum or self.started >= self.curriculum_episodes:
+        if not self.curriculum:
+            return float("inf")
+        done, length = (
+            (self.update, self.curriculum_updates) if self.curriculum_updates else (self.started, self.curriculum_episodes)
+        )
+        if done >= length:
             return float("inf")
         start = self.curriculum_start_m
-        return start + self.started / self.curriculum_episodes * max(0.0, self.top - start)
+        return start + done / length * max(0.0, self.top - start)
+
+    def _strict_now(self) -> bool:
+        return self.strict_stop_from is not None and self.update >= self.strict_stop_from
 
     def _eligible(self, scene: str) -> list[int]:
         """The scene's episodes under the cap; its closest one when none is."""
@@ -94,9 +122,15 @@ class EpisodeSampler(gym.Wrapper):
         self.started += 1
         return idx[int(self.rng.integers(len(idx)))], int(self.rng.integers(2**31 - 1))
 
-    def _start(self, spec_index: int, ep_seed: int):
+    def _start(self, spec_index: int, ep_seed: int, strict: bool | None = None):
+        """Start episode `spec_index`; under evaluation's STOP rule when `strict` (default: the schedule's now)."""
+        strict = self._strict_now() if strict is None else strict
+        if self.base_task is not None and not self.base_task.failed_stop_ends:
+            import dataclasses
+
+            self.env.unwrapped.set_task(dataclasses.replace(self.base_task, failed_stop_ends=strict))
         obs, info = self.env.reset(seed=ep_seed, options={"episode": self.episodes[spec_index]})
-        self.spec_index, self.ep_seed, self.actions = spec_index, ep_seed, []
+        self.spec_index, self.ep_seed, self.actions, self.strict_stop = spec_index, ep_seed, [], strict
         return obs, info
 
     @property
@@ -148,6 +182,8 @@ class EpisodeSampler(gym.Wrapper):
             "actions": list(self.actions),
             "skipped": self.skipped,
             "started": self.started,
+            "update": self.update,
+            "strict_stop": self.strict_stop,
         }
 
     def set_state(self, state: dict):
@@ -155,7 +191,8 @@ class EpisodeSampler(gym.Wrapper):
         self.rng.bit_generator.state = state["rng"]
         self.scene, self.remaining, self.skipped = state["scene"], state["remaining"], state["skipped"]
         self.started = int(state.get("started", 0))  # states written before the curriculum lack it
-        obs, info = self._start(state["spec_index"], state["ep_seed"])
+        self.update = int(state.get("update", 0))
+        obs, info = self._start(state["spec_index"], state["ep_seed"], bool(state.get("strict_stop", False)))
         for a in state["actions"]:
             obs, _, _, _, info = self.step(a)
         return obs, info

@@ -43,9 +43,13 @@ class EnvRecipe:
     sample_episodes: bool = True  # False: the caller picks each episode (reset(options={"episode": ...}))
     seed: int = 0
     scene_repeat: int = 4
-    # start-distance curriculum of the EpisodeSampler (0 = off): cap in m, episodes per env to reach all
+    # start-distance curriculum of the EpisodeSampler (0 = off): cap in m, and when the cap reaches every
+    # episode: after `curriculum_updates` trainer updates (> 0), else after `curriculum_episodes` per env
     curriculum_start_m: float = 0.0
     curriculum_episodes: int = 0
+    curriculum_updates: int = 0
+    # the trainer update from which a failed STOP ends the episode (evaluation's rule); None = task's rule
+    strict_stop_from: int | None = None
 
     @property
     def needs_privileged(self) -> bool:
@@ -96,6 +100,8 @@ def build_env(recipe: EnvRecipe) -> gym.Env:
             recipe.scene_repeat,
             recipe.curriculum_start_m,
             recipe.curriculum_episodes,
+            recipe.curriculum_updates,
+            recipe.strict_stop_from,
         )
     return env
 

@@ -135,11 +135,18 @@ class BCConfig:
 
 @dataclass(frozen=True)
 class CurriculumConfig:
-    """Start-distance curriculum (RL from scratch): each env's first episodes start within `start_m` of the
-    goal (geodesic, the dataset's `info.geodesic_distance`), the cap grows linearly with the episodes that
-    env has started and covers every episode after `episodes` of them. `start_m` 0 = off (all episodes)."""
+    """Start-distance curriculum (RL from scratch): an env's first episodes start within `start_m` of the goal
+    (geodesic, the dataset's `info.geodesic_distance`); the cap grows linearly to every episode. `start_m` 0 = off.
+
+    unit `updates` (default): the cap covers every episode after `fraction` of the run's updates, the same
+    update for every env, so the curriculum ends when the schedule says, whatever the episode lengths.
+    unit `episodes`: each env's cap grows with the episodes it has started and covers every episode after
+    `episodes` of them (how it was counted before; a 1000-update run ended with ~237 of 300 per env).
+    """
 
     start_m: float = non_negative(0.0)
+    unit: Literal["updates", "episodes"] = "updates"
+    fraction: float = in_range(0.5, 0.0, 1.0, lo_open=True)
     episodes: int = positive(300)
 
 
@@ -162,6 +169,11 @@ class TrainConfig:
     rollout_steps: int = positive(100)
     scene_repeat: int = positive(16)  # episodes sampled from a scene before an env may switch scene (world reloads)
     curriculum: CurriculumConfig = field(default_factory=CurriculumConfig)
+    # Evaluation's STOP rule for the last part of training: from this fraction of the run's updates on, a STOP
+    # outside the success region ends a training episode as a failure even with `task.failed_stop_ends` false
+    # (the rule every evaluated episode follows), so the policy is scored by the rules it last trained under.
+    # 1 = never (the whole run under `task.failed_stop_ends`); no effect when that is true.
+    failed_stop_ends_from: float = in_range(0.75, 0.0, 1.0)
     # Budget: environment steps over all ranks; `max_updates` > 0 caps the number of updates instead.
     total_steps: int = positive(150_000_000)
     max_updates: int = non_negative(0)
@@ -243,7 +255,8 @@ def _cpu_small() -> TrainConfig:
         # The CPU camera: portrait like the Stretch camera (paper: 360x640, 42 deg HFOV) at 72x128; a landscape
         # frame hides the floor and low furniture in front of the agent.
         sim=cpu_sim_config(),
-        task=TaskConfig(max_steps=300),
+        # task: the evaluation's (500 steps): a policy trained on 300-step episodes never learned what its
+        # last 200 evaluated steps are for
         num_envs=8,
         env_workers=2,
         rollout_steps=64,

@@ -143,6 +143,7 @@ def train_dagger(
                 return action, actor.distribution(logits).log_prob(action)
 
             # ---- rollout: the student acts, the expert labels -------------------------------------
+            run.begin_update(update)
             with run.acting():
                 ro = collector.collect(actor, T, choose)
             t1 = time.perf_counter()

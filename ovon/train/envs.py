@@ -108,6 +108,10 @@ class TrainEnvs:
         done = term | trunc
         return self._batch(obs, reward, done, done, infos)
 
+    def set_update(self, update: int) -> None:
+        """The update now starting, on every env's sampler (its schedule's clock)."""
+        self.vec.call("set_update", int(update))
+
     def get_state(self) -> list[dict]:
         return self.vec.get_state()
 

@@ -64,6 +64,7 @@ def train_ppo(
         for update in range(run.start_update, total):
             t0 = time.perf_counter()
             tuner.begin(update, optimizer)
+            run.begin_update(update)
             with run.acting():
                 ro = collector.collect(policy, cfg.rollout_steps, choose, bootstrap=True)
             t1 = time.perf_counter()

@@ -97,11 +97,15 @@ class TrainRun:
             expert_cfg=expert_config(cfg) if label else None,
             expert_viewpoint_radius=cfg.expert_viewpoint_radius_m,
             scene_repeat=cfg.scene_repeat,
-            curriculum_start_m=cfg.curriculum.start_m,
-            curriculum_episodes=cfg.curriculum.episodes,
+            **schedule(cfg, task, num_updates(cfg, self.info.world_size)),
         )
         self.envs = TrainEnvs(recipe, mine, cfg.num_envs, cfg.env_workers, cfg.seed * 1000 + self.info.rank)
         return self.envs, self.envs.reset()
+
+    def begin_update(self, update: int) -> None:
+        """Tell the envs which update starts (0-based): the clock of the curriculum and of the STOP rule."""
+        if self.envs is not None:
+            self.envs.set_update(update)
 
     def policy_for(self, batch):
         """`build_policy` with the image / goal dims of the envs' first batch."""
@@ -286,6 +290,22 @@ def load_init_policy(path: str | Path, encoder_cfg, task_kind: str | None = None
     return policy
 
 
+def schedule(cfg: TrainConfig, task: TaskConfig, total: int) -> dict[str, Any]:
+    """The env sampler's schedule in updates of this run: when the curriculum reaches every episode, and from
+    which update a failed STOP ends a training episode (evaluation's rule; only when the task says it does not)."""
+    cur = cfg.curriculum
+    by_updates = cur.start_m > 0 and cur.unit == "updates"
+    strict = None
+    if not task.failed_stop_ends and cfg.failed_stop_ends_from < 1.0:
+        strict = int(round(cfg.failed_stop_ends_from * total))
+    return {
+        "curriculum_start_m": cur.start_m,
+        "curriculum_episodes": cur.episodes if cur.unit == "episodes" else 0,
+        "curriculum_updates": max(1, int(round(cur.fraction * total))) if by_updates else 0,
+        "strict_stop_from": strict,
+    }
+
+
 def num_updates(cfg: TrainConfig, world_size: int) -> int:
     if cfg.max_updates > 0:
         return cfg.max_updates
@@ -303,6 +323,9 @@ def policy_extra(cfg: TrainConfig, algo: str, update: int, step: int, policy) ->
         "step": step,
         "expert": cfg.expert,
         "task": to_dict(cfg.task),
+        # the temperature the policy last acted at in training (PPO's, else the cross-entropy's 1): what
+        # `PolicyAgent` samples at unless told otherwise, so a policy is scored as it was trained
+        "acting_temperature": cfg.ppo.temperature if algo.startswith("ppo") else 1.0,
         "text_table": {k: torch.as_tensor(v).float() for k, v in table.items()},
         "camera": {k: v for k, v in to_dict(cfg.sim.camera).items() if isinstance(v, int | float | str)},
     }
