@@ -114,7 +114,7 @@ def load_world_vl(checkpoint: str | Path | None = None) -> WorldVL:
             f"checkpoint {path}: not a world-vl weights file ({type(e).__name__}: {e}); fix: pass a file written "
             "by `ovon perception pretrain`"
         ) from None
-    net.eval()
+    net = net.eval().for_inference()  # the roles only act: BatchNorm folded, channels-last
     cal = meta["calibration"]
     source = SHIPPED if path == shipped_path() else str(path)
     model = WorldVL(net, float(cal["threshold"]), str(cal["pooling"]), source, meta)
