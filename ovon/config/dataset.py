@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar, Literal
 
-from ovon.config.base import Range, build, in_range, less, non_empty, non_negative, positive
+from ovon.config.base import Each, Range, build, constrained, in_range, less, non_empty, non_negative, positive, rule
 
 
 @dataclass(frozen=True)
@@ -36,8 +36,20 @@ class StartConfig:
     pointnav_ratio_rejection: bool = True  # keep w.p. 20*(r-0.98)^2 when r < 1.1
     max_tries: int = in_range(2000, 1, 10_000_000)
     oracle_check: bool = True  # keep a start only if the shortest-path oracle finishes from it (grid rollout)
+    # Start-distance strata of the val splits: geodesic bin edges (m, increasing), e.g. [1, 2.5, 4.5, 7, 30]. Each
+    # val split's episodes are dealt over the bins in turn, so every split has the same number of episodes per bin
+    # and the splits differ in their goal categories, not in how far their starts are (docs/concepts/protocol.md).
+    # () = no strata (the paper's sampling).
+    val_strata_m: tuple[float, ...] = constrained((), Each(Range(0.0, 1000.0)))
 
-    rules: ClassVar = (less("min_geodesic", "max_geodesic"),)
+    rules: ClassVar = (
+        less("min_geodesic", "max_geodesic"),
+        rule(
+            ("val_strata_m",),
+            lambda e: len(e) == 0 or (len(e) >= 2 and all(a < b for a, b in zip(e, e[1:]))),
+            "starts.val_strata_m empty or at least two increasing edges, e.g. [1.0, 2.5, 4.5, 7.0, 30.0]",
+        ),
+    )
 
 
 @dataclass(frozen=True)

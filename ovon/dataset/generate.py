@@ -23,8 +23,9 @@ import time
 import warnings
 import zlib
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -248,10 +249,22 @@ def episodes_job(job: dict) -> dict:
             _oracle_accept(grid, fld, oracle_vps, cfg) if cfg.starts.oracle_check else None,
         )
     dropped = set()
+    strata: dict[str, list[int]] = job.get("strata") or {}
+    n_bins = max(0, len(cfg.starts.val_strata_m) - 1)
     while queue:
         for cat in list(queue):
             cats, grid, fld, vps, accept = per_cat[cat]
-            start = sample_start(grid, fld, vps, cfg.starts, rng, reasons, accept)
+            if strata.get(cat):
+                start = None
+                target = strata[cat][alloc[cat] - queue[cat]]
+                for j, bounds in stratum_bounds(cfg.starts, target, n_bins):
+                    start = sample_start(grid, fld, vps, bounds, rng, reasons, accept)
+                    if start is not None:
+                        if j != target:
+                            reasons["stratum_moved"] += 1
+                        break
+            else:
+                start = sample_start(grid, fld, vps, cfg.starts, rng, reasons, accept)
             if start is None:
                 reasons["category_without_start"] += 1
                 dropped.add(cat)
@@ -327,6 +340,34 @@ def _oracle_accept(grid, fld, oracle_vps: list, cfg: GenerationConfig):  # noqa:
 
 
 # -- allocation ------------------------------------------------------------------------------------
+def deal_strata(counts: dict, pairs: list, n_bins: int) -> dict[str, dict[str, list[int]]]:
+    """Each val episode's start-distance bin: the split's episodes, in (scene, category) order, are dealt over
+    the `n_bins` bins in turn, so every split holds the same number per bin (+-1) whatever its categories.
+    {scene: {category: [bin of its 1st, 2nd, ... episode]}}; {} without strata."""
+    if n_bins < 1:
+        return {}
+    out: dict[str, dict[str, list[int]]] = {}
+    k = 0
+    for scene, cat in pairs:
+        n = counts[(scene, cat)]
+        out.setdefault(scene, {})[cat] = [(k + i) % n_bins for i in range(n)]
+        k += n
+    return out
+
+
+def stratum_bounds(starts, b: int, n_bins: int) -> list[tuple[int, Any]]:
+    """The start configs of bin `b` and, as fallbacks, of the other bins nearest first: a bin this goal cannot
+    fill (a small house has no 7 m path) moves its episode to the closest bin that it can (counted)."""
+    edges = starts.val_strata_m
+    order = sorted(range(n_bins), key=lambda j: (abs(j - b), j))
+    out = []
+    for j in order:
+        lo, hi = max(starts.min_geodesic, edges[j]), min(starts.max_geodesic, edges[j + 1])
+        if lo < hi:
+            out.append((j, replace(starts, min_geodesic=lo, max_geodesic=hi)))
+    return out
+
+
 def largest_remainder(total: int, keys: list, weights: list[float] | None = None) -> dict:
     """Split `total` over keys in proportion to weights, integers summing exactly to total."""
     if not keys:
@@ -500,6 +541,7 @@ def generate(
             pairs = [(s, c) for s, cs in sorted(eligible.items()) for c in cs]
             flat = largest_remainder(cfg.episodes_per_val_split, pairs)
             allocs = {s: {c: flat[(s, c)] for c in cs} for s, cs in eligible.items()}
+            strata = deal_strata(flat, pairs, len(cfg.starts.val_strata_m) - 1)
         for r in scene_refs:
             ep_jobs.append(
                 {
@@ -509,6 +551,8 @@ def generate(
                     "split": split,
                     "allocation": allocs[r.stem],
                     "children": children[split],
+                    # val splits with start-distance strata: each episode's bin, per category, in order
+                    "strata": {} if split == "train" else strata.get(r.stem, {}),
                 }
             )
         write_split_shell(out, split)

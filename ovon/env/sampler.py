@@ -93,9 +93,10 @@ class EpisodeSampler(gym.Wrapper):
         """The curriculum's cap on the start distance (m) for the next episode (inf without one)."""
         if not self.curriculum:
             return float("inf")
-        done, length = (
-            (self.update, self.curriculum_updates) if self.curriculum_updates else (self.started, self.curriculum_episodes)
-        )
+        if self.curriculum_updates:
+            done, length = self.update, self.curriculum_updates
+        else:
+            done, length = self.started, self.curriculum_episodes
         if done >= length:
             return float("inf")
         start = self.curriculum_start_m
