@@ -154,7 +154,9 @@ class CurriculumConfig:
 class TrainConfig:
     algo: Algo = "dagger"
     policy: PolicyConfig = field(default_factory=PolicyConfig)
-    encoder: EncoderConfig = field(default_factory=EncoderConfig)
+    # learned perception unless a preset or `--encoder` names another: ovon's pretrained world-vl (shipped
+    # weights); the oracle (`oracle-vl`, ORACLE PERCEPTION) only when asked for by name
+    encoder: EncoderConfig = field(default_factory=lambda: EncoderConfig(image="world-vl"))
     sim: SimConfig = field(default_factory=cpu_sim_config)
     task: TaskConfig = field(default_factory=TaskConfig)
     expert: ExpertName = "frontier"
@@ -244,8 +246,9 @@ def _cpu_small() -> TrainConfig:
         policy=PolicyConfig(
             hidden=128, layers=2, heads=4, mlp=256, context=64, prev_action_dim=0, goal_similarity=True
         ),
+        # learned perception (world-vl, frozen; the shipped weights); --encoder oracle-vl is the oracle upper bound
         encoder=EncoderConfig(
-            image="oracle-vl",
+            image="world-vl",
             text="minilm-text",
             oracle_grid=2,
             oracle_global=True,
@@ -286,6 +289,7 @@ def _cpu_small() -> TrainConfig:
 
 
 def _tiny() -> TrainConfig:
+    """Seconds per run for the tests; the oracle encoder by name (no RGB to render, no network to run)."""
     return TrainConfig(
         policy=PolicyConfig(hidden=32, layers=1, heads=2, mlp=64, context=16, prev_action_dim=8),
         encoder=EncoderConfig(image="oracle-vl", text="minilm-text", oracle_grid=1, oracle_global=False),
