@@ -15,7 +15,9 @@ ovon.cli.main ...` in a child process with the runner's environment), changed on
   includes learning) and rollout-only steps/s (`time/rollout_s`).
 * evaluation: the `dagger` evaluation cell on the DAgger policy this benchmark just trained with each encoder,
   and VLFM with learned perception (`vlfm`: world-owl + world-vl) against `vlfm-oracle` (oracle detection and
-  value); `--episodes` episodes of val_seen, one seed. Reported: episodes/s and env steps/s of the whole command.
+  value); `--episodes` episodes of val_seen, one seed. Reported: episodes/s and env steps/s of the whole command,
+  and env steps per CPU second (the command and its workers, `getrusage`), which a machine busy with other work
+  inflates least: read that ratio when the wall-clock ones disagree between repeats.
   Start-up is in both (about 7 s: importing torch, loading MiniLM for the goal texts, which the oracle's value
   scorer needs too), so few episodes push the ratio toward 1 or, with the learned detector's shorter episodes,
   below the steady value; the default 30 keeps it under a fifth of the time.
@@ -30,6 +32,8 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -71,29 +75,39 @@ def with_set(argv: list[str], key: str, value: str) -> list[str]:
     return out + ["--set", f"{key}={value}"]
 
 
-def run(argv: list[str], log: Path) -> float:
-    """One `ovon` command as the runner runs it; returns its wall seconds (refuses a failed command)."""
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def run(argv: list[str], log: Path) -> tuple[float, float]:
+    """One `ovon` command as the runner runs it; returns its (wall, CPU) seconds, the CPU of its worker
+    processes included (refuses a failed command). CPU seconds are what a busy machine inflates least."""
     from ovon.experiments.runner import child_env
 
     log.parent.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _children_cpu()
     with open(log, "ab") as f:
         code = subprocess.call(
             [sys.executable, "-m", "ovon.cli.main", *argv], stdout=f, stderr=subprocess.STDOUT, env=child_env()
         )
     if code != 0:
         raise SystemExit(f"`ovon {' '.join(argv)}` failed (exit {code}); its output: {log}")
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, _children_cpu() - c0
 
 
 def _share(row: dict) -> float:
     return (row["time/rollout_s"] + row["time/learn_s"]) / row["time/rollout_s"]
 
 
-def train_rates(folder: Path) -> dict:
+def train_rates(folder: Path, cpu: float) -> dict:
     rows = [json.loads(line) for line in (folder / "metrics.jsonl").read_text().splitlines() if line.strip()]
     steady = rows[1:] or rows
+    steps = int(rows[-1].get("step", 0)) if rows else 0
     return {
+        "cpu_s": cpu,
+        "steps": steps,
+        "steps_per_cpu_s": steps / cpu if cpu > 0 else None,
         "steps_per_s": float(np.median([r["steps_per_s"] for r in steady])),
         # steps_per_s counts rollout + learning; the rollout alone: the same steps over its share of the time
         "rollout_steps_per_s": float(np.median([r["steps_per_s"] * _share(r) for r in steady])),
@@ -101,13 +115,15 @@ def train_rates(folder: Path) -> dict:
     }
 
 
-def eval_rates(folder: Path, wall: float) -> dict:
+def eval_rates(folder: Path, wall: float, cpu: float) -> dict:
     eps = [json.loads(line) for line in (folder / "episodes.jsonl").read_text().splitlines() if line.strip()]
     steps = sum(int(e["steps"]) for e in eps)
     return {
         "episodes": len(eps),
         "steps": steps,
         "wall_s": wall,
+        "cpu_s": cpu,
+        "steps_per_cpu_s": steps / cpu if cpu > 0 else None,
         "episodes_per_s": len(eps) / wall,
         "steps_per_s": steps / wall,
         "sr": float(np.mean([e["success"] for e in eps])) if eps else None,
@@ -152,11 +168,9 @@ def main() -> None:
                 argv = with_set(argv, "progress", "false")
                 argv = with_option(argv, "--out", str(out))
                 if out.exists():
-                    import shutil
-
                     shutil.rmtree(out)
-                run(argv, logs / f"{name}-{enc}.log")
-                results["train"].setdefault(name, {}).setdefault(enc, []).append(train_rates(out))
+                _, cpu = run(argv, logs / f"{name}-{enc}.log")
+                results["train"].setdefault(name, {}).setdefault(enc, []).append(train_rates(out, cpu))
                 print(f"train {name:10s} {enc:9s} {results['train'][name][enc][-1]}", flush=True)
             if args.no_eval:
                 continue
@@ -172,19 +186,21 @@ def main() -> None:
                 for flag, value in (("--episodes", str(args.episodes)), ("--seeds", "0"), ("--splits", "val_seen")):
                     argv = with_option(argv, flag, value)
                 argv = with_option(argv, "--out", str(out))
-                wall = run(argv, logs / f"eval-{cell_name}-{enc}.log")
-                results["eval"].setdefault(label, {}).setdefault(enc, []).append(eval_rates(out, wall))
+                if out.exists():  # an evaluation folder resumes: start it over
+                    shutil.rmtree(out)
+                wall, cpu = run(argv, logs / f"eval-{cell_name}-{enc}.log")
+                results["eval"].setdefault(label, {}).setdefault(enc, []).append(eval_rates(out, wall, cpu))
                 print(f"eval  {label:15s} {enc:9s} {results['eval'][label][enc][-1]}", flush=True)
 
     ratios: dict = {}
-    for part, key in (("train", "steps_per_s"), ("eval", "episodes_per_s")):
+    keys = {"train": ("steps_per_s", "steps_per_cpu_s"), "eval": ("episodes_per_s", "steps_per_s", "steps_per_cpu_s")}
+    for part, names in keys.items():
         for name, by_enc in results[part].items():
-            if set(ENCODERS) <= set(by_enc):
+            if not set(ENCODERS) <= set(by_enc):
+                continue
+            for key in names:
                 med = {e: float(np.median([r[key] for r in by_enc[e]])) for e in ENCODERS}
                 ratios[f"{part}:{name}:{key}"] = med["world-vl"] / med["oracle-vl"]
-                if part == "eval":
-                    steps = {e: float(np.median([r["steps_per_s"] for r in by_enc[e]])) for e in ENCODERS}
-                    ratios[f"{part}:{name}:steps_per_s"] = steps["world-vl"] / steps["oracle-vl"]
     print("\nworld-vl / oracle ratios (target >= 0.6):")
     for k, v in ratios.items():
         print(f"  {k:40s} {v:.2f} {'ok' if v >= TARGET else 'BELOW TARGET'}")
