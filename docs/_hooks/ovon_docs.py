@@ -21,8 +21,10 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import html
 import importlib
 import inspect
+import re
 import textwrap
 import typing
 from pathlib import Path
@@ -117,26 +119,54 @@ def _commands(parser: argparse.ArgumentParser, prefix: str) -> list[tuple[str, a
     return out
 
 
-def _option_row(action: argparse.Action) -> str:
-    if action.option_strings:
-        names = ", ".join(action.option_strings)
-    else:
-        names = action.metavar or action.dest
-    if isinstance(action, argparse._StoreTrueAction | argparse._StoreFalseAction):  # noqa: SLF001
+def _html_cell(text: Any) -> str:
+    """Plain text safe inside a Markdown table cell: one line, HTML-escaped (a `<out>` placeholder stays
+    visible), pipes as the entity so they never split the row."""
+    escaped = html.escape(" ".join(str(text).split()), quote=False).replace("|", "&#124;")
+    # a `code span` would show the entities literally: made an HTML <code> element instead
+    return re.sub(r"`([^`]+)`", r"<code>\1</code>", escaped)
+
+
+def _html_code(text: Any) -> str:
+    return f"<code>{_html_cell(text)}</code>"
+
+
+def option_help(action: argparse.Action, prog: str = "ovon") -> str:
+    """An option's help as `--help` words it (its `%(default)s` style fields filled in)."""
+    text = action.help or ""
+    if "%" in text:
+        try:
+            text = text % {**vars(action), "prog": prog}
+        except (KeyError, TypeError, ValueError):
+            pass
+    return text
+
+
+def option_fields(action: argparse.Action) -> tuple[str, str, str, str]:
+    """(option names, value it takes, default shown, help) of one argparse action, as plain text."""
+    from ovon.cli.main import shown_default
+
+    names = ", ".join(action.option_strings) if action.option_strings else (action.metavar or action.dest)
+    if action.nargs == 0:  # store_true / store_false / count / version: a flag
         value = "flag"
     elif action.choices is not None:
-        value = " \\| ".join(str(c) for c in action.choices)
+        value = "one of " + ", ".join(str(c) for c in action.choices)
     else:
-        value = action.metavar or action.dest.upper()
+        value = str(action.metavar or action.dest.upper())
         if action.nargs in ("+", "*"):
             value += " ..."
     if action.required:
         value += " (required)"
     if isinstance(action, argparse._AppendAction):  # noqa: SLF001
         value += " (repeatable)"
-    default = action.default
-    shown = "" if default in (None, argparse.SUPPRESS, False, [], "") else _code(default)
-    return f"| {_code(names)} | {_cell(value)} | {shown} | {_cell(action.help or '')} |"
+    default = None if isinstance(action, argparse._VersionAction) else shown_default(action.default)  # noqa: SLF001
+    return names, value, default or "", option_help(action)
+
+
+def _option_row(action: argparse.Action) -> str:
+    names, value, default, help_ = option_fields(action)
+    shown = _html_code(default) if default else ""
+    return f"| {_html_code(names)} | {_html_cell(value)} | {shown} | {_html_cell(help_)} |"
 
 
 def cli_reference() -> str:
@@ -149,7 +179,7 @@ def cli_reference() -> str:
         depth = full.count(" ")
         lines.append(f"{'#' * (depth + 1)} `{full}`\n")
         if help_ or sub.description:
-            lines.append(_cell(sub.description or help_) + "\n")
+            lines.append(_html_cell(sub.description or help_) + "\n")
         actions = [a for a in sub._actions if not isinstance(a, argparse._HelpAction | argparse._SubParsersAction)]  # noqa: SLF001
         if actions:
             lines.append("| option | value | default | what it does |")

@@ -87,8 +87,13 @@ def register(sub) -> None:
 
     g = dsub.add_parser("generate", help="generate episodes for a scene dataset folder (train/ and val/)")
     g.add_argument("--scenes", required=True, help="scene dataset folder holding train/ and val/")
-    g.add_argument("--out", required=True)
-    g.add_argument("--preset", choices=["paper", "fast"], default="fast")
+    g.add_argument("--out", required=True, help="dataset folder to write (train/, val_seen/, ...)")
+    g.add_argument(
+        "--preset",
+        choices=["paper", "fast"],
+        default="fast",
+        help="starting GenerationConfig values (paper: the paper's sizes)",
+    )
     g.add_argument("--split", action="append", help="only these splits (repeatable); default all four")
     g.add_argument("--categories", help="an existing categories.json to reuse (from `ovon dataset splits`)")
     g.add_argument("--config", help="YAML with GenerationConfig fields")
@@ -99,39 +104,43 @@ def register(sub) -> None:
         metavar="KEY=VALUE",
         help="override, e.g. episodes_per_val_split=300 or viewpoints.render_size=128",
     )
-    g.add_argument("--workers", default=min(2, os.cpu_count() or 1))
-    g.add_argument("--executor", choices=["process", "ray"], default="process")
-    g.add_argument("--no-progress", action="store_true")
+    g.add_argument("--workers", default=min(2, os.cpu_count() or 1), help="worker processes")
+    g.add_argument(
+        "--executor", choices=["process", "ray"], default="process", help="run the workers as local processes or on ray"
+    )
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.set_defaults(func=cmd_generate)
 
     s = dsub.add_parser("splits", help="category split by SentenceBERT similarity -> categories.json")
     s.add_argument("--scenes", help="scene dataset folder: split the categories annotated in it")
     s.add_argument("--vocabulary", action="store_true", help="split the whole embedded vocabulary instead")
-    s.add_argument("--seed", default=0)
-    s.add_argument("--threshold", default=0.68)
-    s.add_argument("--holdout", default=0.25)
+    s.add_argument("--seed", default=0, help="seed of the held-out draw")
+    s.add_argument(
+        "--threshold", default=0.68, help="SentenceBERT cosine similarity above which a category counts as seen-like"
+    )
+    s.add_argument("--holdout", default=0.25, help="fraction of the categories held out as unseen")
     s.add_argument("--out", required=True, help="path of categories.json")
     s.set_defaults(func=cmd_splits)
 
     st = dsub.add_parser("stats", help="per-split numbers (Table 1/2 style)")
-    st.add_argument("data")
+    st.add_argument("data", help="episode dataset root (holds train/, val_seen/, ...)")
     st.add_argument("--json", action="store_true", help="print JSON instead of tables")
     st.set_defaults(func=cmd_stats)
 
     v = dsub.add_parser("validate", help="schema + every start reachable within limits")
-    v.add_argument("data")
-    v.add_argument("--scenes", required=True)
-    v.add_argument("--split", action="append")
-    v.add_argument("--max-episodes-per-scene")
+    v.add_argument("data", help="episode dataset root (holds train/, val_seen/, ...)")
+    v.add_argument("--scenes", required=True, help="scene-datasets root the episodes refer to")
+    v.add_argument("--split", action="append", help="only this split (repeatable); default: every split")
+    v.add_argument("--max-episodes-per-scene", help="check at most this many episodes per scene (default: all)")
     v.set_defaults(func=cmd_validate)
 
     ve = dsub.add_parser("verify", help="inventory of a download: junk files, empty split files, name mix-ups, gaps")
-    ve.add_argument("data")
+    ve.add_argument("data", help="episode dataset root of the download")
     ve.add_argument("--scenes", help="scene-datasets root: also report scenes referenced but missing")
     ve.set_defaults(func=cmd_verify)
 
     su = dsub.add_parser("subset", help="a canonical episode subset chosen by content (the same for everyone)")
-    su.add_argument("data")
+    su.add_argument("data", help="episode dataset root to draw the subset from")
     su.add_argument("--size", required=True, help="episodes per split")
     su.add_argument("--name", help="the subset's name (default: size<N>)")
     su.add_argument("--split", action="append", help="split to include (repeatable; default: the val splits)")

@@ -48,7 +48,7 @@ def register(sub) -> None:
     p.add_argument("--val-scenes", default=3, help=f"procedural val houses (1 to {VAL_CAP})")
     p.add_argument("--episodes", default=20, help="episodes per split and agent")
     p.add_argument("--seeds", default="0,1", help="comma-separated, distinct, >= 0 (e.g. 0,1)")
-    p.add_argument("--workers", default=2)
+    p.add_argument("--workers", default=2, help="worker processes")
     p.set_defaults(func=cmd_demo)
 
 

@@ -46,7 +46,7 @@ def register(sub) -> None:
     p.add_argument("--procedural", metavar="SEEDS", help="--task pointnav: house seeds, e.g. 80000-80003")
     p.add_argument("--data", help="episode dataset root (holds val_seen/ ...); required for objectnav")
     p.add_argument("--scenes", help="scene-datasets root or the scene dataset folder; required for objectnav")
-    p.add_argument("--splits", default=",".join(VAL_SPLITS))
+    p.add_argument("--splits", default=",".join(VAL_SPLITS), help="comma-separated splits to evaluate")
     p.add_argument("--seeds", default="0", help="comma-separated, e.g. 0,1,2")
     p.add_argument(
         "--episodes", default=None, help="episodes per split (default: all); pointnav: per house (default 50)"
@@ -71,8 +71,10 @@ def register(sub) -> None:
         metavar="KEY=VALUE",
         help="config override, e.g. sim.camera.width=224 or task.max_steps=300",
     )
-    p.add_argument("--workers", default=min(2, os.cpu_count() or 1))
-    p.add_argument("--executor", choices=["process", "ray"], default="process")
+    p.add_argument("--workers", default=min(2, os.cpu_count() or 1), help="worker processes")
+    p.add_argument(
+        "--executor", choices=["process", "ray"], default="process", help="run the workers as local processes or on ray"
+    )
     p.add_argument("--name", help="row name in tables (default: the agent name)")
     p.add_argument(
         "--strict",
@@ -94,11 +96,11 @@ def register(sub) -> None:
         "changes a setting makes the run's protocol card say custom",
     )
     p.add_argument("--out", required=True, help="run folder (episodes.jsonl, summary.json, table.md)")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_evaluate)
 
     r = sub.add_parser("report", help="markdown table + figures comparing run folders")
-    r.add_argument("runs", nargs="+")
+    r.add_argument("runs", nargs="+", help="run folders written by ovon evaluate")
     r.add_argument("--out", help="report folder (default: <first run>/report)")
     r.set_defaults(func=cmd_report)
 
@@ -110,20 +112,20 @@ def register(sub) -> None:
     c.set_defaults(func=cmd_curve)
 
     v = sub.add_parser("video", help="render an evaluated episode to mp4")
-    v.add_argument("--run", required=True)
-    v.add_argument("--episode", required=True)
-    v.add_argument("--split")
-    v.add_argument("--seed")
+    v.add_argument("--run", required=True, help="run folder written by ovon evaluate")
+    v.add_argument("--episode", required=True, help="episode id to render")
+    v.add_argument("--split", help="split of the episode (needed when the run evaluated several)")
+    v.add_argument("--seed", help="evaluation seed of the episode (needed when the run has several)")
     v.add_argument("--scene", help="part of the scene path (episode ids are unique per scene only)")
     v.add_argument("--data", help="episode dataset root, when it moved since the evaluation (default: the run's)")
     v.add_argument("--scenes", help="scenes root, when it moved since the evaluation (default: the run's)")
-    v.add_argument("--fps", default=8)
+    v.add_argument("--fps", default=8, help="frames per second of the video")
     v.add_argument(
         "--no-agent-view",
         action="store_true",
         help="leave out the panel of what the agent believes (agents with debug_frame, e.g. vlfm)",
     )
-    v.add_argument("--out", required=True)
+    v.add_argument("--out", required=True, help="mp4 file to write")
     v.set_defaults(func=cmd_video)
 
 
@@ -131,6 +133,11 @@ def cmd_evaluate(args) -> int:
     from ovon.evaluate.config import eval_config
     from ovon.evaluate.harness import evaluate
 
+    for flag, value, what in (
+        ("--data", args.data, "the episode dataset root (holds val_seen/ ...)"),
+        ("--scenes", args.scenes, "the scene-datasets root or the scene dataset folder"),
+    ):
+        check_folder(flag, value, what)
     notes: list[str] = []
     cfg = eval_config(args, notes)
     for note in notes:
@@ -142,6 +149,24 @@ def cmd_evaluate(args) -> int:
     note = f" ({skipped} skipped before the run, see above)" if skipped else ""
     print(f"{n} episodes{note}; run folder: {args.out}")
     return 0
+
+
+def check_folder(flag: str, value: str | None, what: str) -> None:
+    """One line for a folder option naming no folder (before the config's own check, whose message
+    would cite the config's default rather than what was typed)."""
+    if value and value.strip() and not Path(value).is_dir():
+        why = "is a file" if Path(value).exists() else "does not exist"
+        raise ValueError(f"{flag} {value}: {why}; expected {what}; fix: check the path")
+
+
+def check_runs(runs: list[str], written_by: str) -> None:
+    """One line naming the first RUNS entry that is not a run folder, or a repeated one."""
+    seen: set[str] = set()
+    for run in runs:
+        check_folder("RUNS", run, f"a run folder written by {written_by}")
+        if str(Path(run).resolve()) in seen:
+            raise ValueError(f"RUNS: {run} is given twice; expected distinct run folders; fix: name each once")
+        seen.add(str(Path(run).resolve()))
 
 
 @dataclass(frozen=True)
@@ -162,6 +187,7 @@ class VideoArgs:
 def cmd_report(args) -> int:
     from ovon.reports.build import build_report
 
+    check_runs(args.runs, "`ovon evaluate`")
     a = from_args(ReportArgs, args, runs=tuple(args.runs))
     out = args.out or str(Path(a.runs[0]) / "report")
     path = build_report(list(a.runs), out)
@@ -180,6 +206,7 @@ class CurveArgs:
 def cmd_curve(args) -> int:
     from ovon.reports.plots import plot_learning_curves
 
+    check_runs(args.runs, "`ovon train`")
     a = from_args(CurveArgs, args, runs=tuple(args.runs))
     path = plot_learning_curves(list(a.runs), args.out, a.metric, a.window)
     print(f"curve: {path}")
@@ -189,6 +216,8 @@ def cmd_curve(args) -> int:
 def cmd_video(args) -> int:
     from ovon.reports.video import render_video
 
+    check_folder("--data", args.data, "the episode dataset root (holds val_seen/ ...)")
+    check_folder("--scenes", args.scenes, "the scenes root")
     a = from_args(VideoArgs, args)
     path = render_video(
         a.run,

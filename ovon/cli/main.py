@@ -21,16 +21,73 @@ from pathlib import Path
 GROUPS = ["scenes", "sim", "dataset", "evaluate", "compare", "serve", "train", "perception", "demo", "experiment"]
 
 
+DESCRIPTION = (
+    "ovon: the HM3D-OVON open-vocabulary object-navigation benchmark (arXiv 2409.14296). Make scenes and "
+    "episodes, evaluate an agent on the val splits, train the baselines, compare runs. "
+    "`ovon COMMAND --help` shows a command's options."
+)
+
+
+def shown_default(default: object) -> str | None:
+    """A default as `--help` and the CLI reference show it, None when there is nothing to show."""
+    if default is None or default is argparse.SUPPRESS or default is False or default in ([], "", ()):
+        return None
+    if isinstance(default, list | tuple):
+        return " ".join(str(d) for d in default)
+    return str(default)
+
+
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help that ends with the option's default, unless the help already says it (or there is none)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        help_ = action.help or ""
+        shown = shown_default(action.default)
+        if shown is None or "default" in help_.lower() or not (action.option_strings or action.nargs in "?*"):
+            return help_
+        return f"{help_} (default: {shown.replace('%', '%%')})"
+
+
 class OneLineParser(argparse.ArgumentParser):
-    """argparse prints the usage block before its error; one line naming the option is enough."""
+    """argparse prints the usage block before its error; one line naming the option is enough. Help shows
+    each option's default."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", DefaultsFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: error: {_did_you_mean(message)} (see {self.prog} --help)\n")
+
+
+def _did_you_mean(message: str) -> str:
+    """argparse's "invalid choice: 'evalute' (choose from ...)" with the closest choice suggested."""
+    import difflib
+    import re
+
+    m = re.match(r"argument (\S+): invalid choice: '([^']*)' \(choose from (.*)\)$", message)
+    if m is None:
+        return message
+    choices = re.findall(r"'([^']*)'", m.group(3)) or [c.strip() for c in m.group(3).split(",")]
+    close = difflib.get_close_matches(m.group(2), choices, n=1)
+    hint = f"; did you mean {close[0]}?" if close else ""
+    what = f"argument {m.group(1)}: invalid choice" if m.group(1).startswith("-") else "unknown command"
+    return f"{what} {m.group(2)!s} (expected one of {', '.join(choices)}){hint}"
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("ovon")
+    except PackageNotFoundError:
+        return "unknown (not installed; run `make install`)"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(prog="ovon", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = OneLineParser(prog="ovon", description=DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"ovon {_version()}", help="print the version and exit")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in GROUPS:
         try:
             module = importlib.import_module(f"ovon.cli.{name}")

@@ -318,7 +318,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = p.add_subparsers(dest="scenes_command", required=True)
 
     g = sub.add_parser("generate", help="write procedural houses in the HM3D layout DIR/<split>/<NNNNN-id>/")
-    g.add_argument("--split", choices=sorted(SPLIT_BASE), default="train")
+    g.add_argument("--split", choices=sorted(SPLIT_BASE), default="train", help="which split to write")
     g.add_argument(
         "--count",
         required=True,
@@ -334,7 +334,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="print a summary of one scene (folder or any of its files) or of a habitat "
         "navmesh (X.navmesh: navigable area and islands as habitat computes them)",
     )
-    i.add_argument("path")
+    i.add_argument("path", help="scene folder, one of its files, or an X.navmesh")
     i.add_argument("--json", action="store_true", help="print the summary as JSON")
     i.add_argument(
         "--nav",
@@ -346,15 +346,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     i.set_defaults(func=cmd_inspect)
 
     r = sub.add_parser("render-topdown", help="draw one scene from above (one panel per floor)")
-    r.add_argument("path")
+    r.add_argument("path", help="scene folder or one of its files")
     r.add_argument("--out", required=True, help="PNG file to write")
     r.add_argument("--floor", type=int, default=None, help="only this floor index")
     add_up_argument(r)
     r.set_defaults(func=cmd_render_topdown)
 
     ls = sub.add_parser("list", help="list the scene folders of a dataset tree")
-    ls.add_argument("dataset_dir")
-    ls.add_argument("--split", default=None)
+    ls.add_argument("dataset_dir", help="scene dataset folder (holds train/, val/)")
+    ls.add_argument("--split", default=None, help="only this split (default: every split)")
     ls.set_defaults(func=cmd_list)
 
     v = sub.add_parser("vocabulary", help="print the categories (name, family, placement, HM3DSem count)")

@@ -59,7 +59,12 @@ def _camera_args(p) -> None:
     p.add_argument("--width", type=int, default=cam.width, help=f"pixels (default {cam.width}, the CPU camera)")
     p.add_argument("--height", type=int, default=cam.height, help=f"pixels (default {cam.height}, the CPU camera)")
     p.add_argument("--hfov", type=float, default=None, help="horizontal FOV in degrees (default: the config's)")
-    p.add_argument("--backend", choices=["auto", "gl", "embree"], default="auto")
+    p.add_argument(
+        "--backend",
+        choices=["auto", "gl", "embree"],
+        default="auto",
+        help="renderer (auto: one that works on this machine)",
+    )
 
 
 def register(sub) -> None:
@@ -83,7 +88,7 @@ def register(sub) -> None:
     b = gs.add_parser(
         "bench", help="env steps/s (random moves and turns, auto-reset; depth, semantic and RGB unless --no-rgb)"
     )
-    b.add_argument("--scene", default="procedural:0")
+    b.add_argument("--scene", default="procedural:0", help="scene folder/file or procedural:<seed>")
     b.add_argument("--goal", help="goal category (default: the scene's most frequent floor object)")
     _camera_args(b)
     b.add_argument("--no-rgb", action="store_true", help="skip the RGB channel (what oracle encoders need)")
@@ -92,7 +97,7 @@ def register(sub) -> None:
     )
     b.add_argument("--envs-per-worker", default=4, help="envs hosted by each worker process")
     b.add_argument("--steps", default=1000, help="timed env steps over all envs")
-    b.add_argument("--seed", default=0)
+    b.add_argument("--seed", default=0, help="seed of the start poses and actions")
     b.set_defaults(func=cmd_bench)
 
 

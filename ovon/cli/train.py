@@ -20,7 +20,9 @@ class TrainArgs:
 
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a learned baseline (bc | dagger | ppo); works under torchrun")
-    p.add_argument("--algo", choices=["bc", "dagger", "ppo"], required=True)
+    p.add_argument(
+        "--algo", choices=["bc", "dagger", "ppo"], required=True, help="behaviour cloning, DAgger or PPO (RL)"
+    )
     p.add_argument(
         "--task",
         choices=["objectnav", "pointnav"],
@@ -46,14 +48,16 @@ def register(sub) -> None:
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint.pt exactly")
     p.add_argument("--data", help="episode dataset root (holds train/ ...)")
     p.add_argument("--scenes", help="scene-datasets root")
-    p.add_argument("--split", default="train")
+    p.add_argument("--split", default="train", help="episode split to train on")
     p.add_argument("--episodes", default=None, help="use at most this many episodes of the split (an integer > 0)")
     p.add_argument(
         "--procedural",
         metavar="SEEDS",
         help="ad-hoc episodes on procedural houses instead of a dataset, e.g. 0-7 or 0,3",
     )
-    p.add_argument("--preset", choices=["paper", "cpu-small", "tiny"], default="cpu-small")
+    p.add_argument(
+        "--preset", choices=["paper", "cpu-small", "tiny"], default="cpu-small", help="starting TrainConfig values"
+    )
     p.add_argument("--config", help="YAML file merged over the preset")
     p.add_argument(
         "--set",
