@@ -106,3 +106,33 @@ def test_data_error_names_what_was_given(tmp_path):
     line = res.stderr.strip()
     assert len(line.splitlines()) == 1 and f"--data {tmp_path / 'nope'}: does not exist" in line
     assert "data/datasets/ovon" not in line and "'" not in line
+
+
+@pytest.mark.parametrize("content", ["missing", "empty"])
+def test_stats_refuses_a_shell_only_split(tmp_path, capsys, content):
+    """The release's trap: `<split>/<split>.json.gz` holds only the categories; without content/ the
+    split would count 0 episodes. `stats` refuses it with the line `verify` shows."""
+    import shutil
+    from pathlib import Path
+
+    from ovon.dataset.io import EpisodeDataset
+    from ovon.dataset.verify import shell_only
+
+    root = tmp_path / "release"
+    shutil.copytree(Path(__file__).parent / "fixtures" / "ovon_release", root)
+    shutil.rmtree(root / "val_seen" / "content")
+    if content == "empty":
+        (root / "val_seen" / "content").mkdir()
+    assert main(["dataset", "stats", str(root)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "val_seen is shell-only" in err and "fix:" in err
+    assert shell_only(EpisodeDataset(root, "val_seen")) in err
+    assert main(["dataset", "verify", str(root)]) == 1
+    assert "shell-only" in capsys.readouterr().out
+
+
+def test_stats_of_the_release_fixture_still_counts(capsys):
+    from pathlib import Path
+
+    assert main(["dataset", "stats", str(Path(__file__).parent / "fixtures" / "ovon_release")]) == 0
+    assert "| val_seen | 1 | 2 |" in capsys.readouterr().out

@@ -70,7 +70,19 @@ def dataset_stats(root: str | Path) -> dict:
     root = Path(root)
     if not root.is_dir():
         raise FileNotFoundError(f"dataset folder {root} does not exist")
-    splits = [d.name for d in sorted(root.iterdir()) if d.is_dir() and (d / "content").is_dir()]
+    from ovon.dataset.validate import dataset_splits
+    from ovon.dataset.verify import shell_only
+
+    splits = []
+    for name in dataset_splits(root):
+        ds = EpisodeDataset(root, name)
+        if not ds.split_dir.is_dir():
+            continue  # a known split name that is not there
+        trap = shell_only(ds)
+        if trap is not None:  # its episodes would count 0: refused, as `ovon dataset verify` names it
+            raise DatasetError(f"{trap} (`ovon dataset verify {root}` lists every problem)")
+        if ds.content_dir.is_dir():
+            splits.append(name)
     if not splits:
         raise FileNotFoundError(f"{root} holds no split folders (<split>/content/*.json.gz)")
     out: dict = {"splits": {s: split_stats(root, s) for s in splits}}

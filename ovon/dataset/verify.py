@@ -56,9 +56,29 @@ def _junk(root: Path) -> list[Path]:
     return sorted(p for p in root.rglob("*") if p.name.startswith("._") or p.name in JUNK_NAMES)
 
 
+def shell_only(ds: EpisodeDataset) -> str | None:
+    """The released download's trap, as one line: a split whose only file is the top-level
+    `<split>/<split>.json.gz` (the categories; the episodes are in `<split>/content/*.json.gz`, absent or
+    empty here). None when the split has shards, or no top-level file either."""
+    folder = ds.split_dir
+    top = folder / f"{folder.name}{SHARD_SUFFIX}"
+    if ds.scenes() or not top.is_file():
+        return None
+    where = "is missing" if not ds.content_dir.is_dir() else f"holds no *{SHARD_SUFFIX} file"
+    return (
+        f"split {folder.name} is shell-only: {folder.name}/{top.name} holds the split's categories, not its "
+        f"episodes, and {folder.name}/content/ {where}; expected the episodes in "
+        f"{folder.name}/content/<scene>{SHARD_SUFFIX}; fix: extract the release's {folder.name}/content/ folder "
+        f"into {folder}"
+    )
+
+
 def _split(rep: Verification, split: str, scenes: Path | None) -> None:
     ds = EpisodeDataset(rep.root, split)
     folder = ds.split_dir
+    trap = shell_only(ds)
+    if trap is not None:
+        rep.add(split, "error", "shell-only split (no content/ episodes)", trap)
     if folder.name != split:
         rep.add(split, "note", "split folder name", f"read from {folder.name}/ (the same split's other name)")
     tops = sorted(p.name for p in folder.glob(f"*{SHARD_SUFFIX}") if not p.name.startswith("._"))
