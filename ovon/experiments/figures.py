@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
 from matplotlib.figure import Figure
 from matplotlib.ticker import EngFormatter, MaxNLocator
 
@@ -22,41 +21,64 @@ def _save(fig, out: Path) -> Path:
 
 
 def table_figure(title: str, table: dict, out: Path) -> Path:
-    """Grouped bars: per row, SR of each column (ours solid with the std, the paper's hatched)."""
+    """One panel per column (split) of the table: for each row (agent) SR of ours (solid, with its std
+    over seeds as the error bar) beside the paper's (hatched). Panels two to a line, so that a table of
+    many rows and splits stays a page-shaped figure with a legend one can read."""
     rows, cols = table["rows"], table["columns"]
-    n = len(cols)
-    width = 0.8 / (2 * n)
-    fig = Figure(figsize=(max(5.0, 1.4 * len(rows) * n / 2 + 2), 3.6))
-    ax = fig.subplots()
-    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
-    for j, col in enumerate(cols):
-        xs_ours = [i + (2 * j - n + 0.5) * width for i in range(len(rows))]
+    n = max(1, len(cols))
+    ncols = min(2, n)
+    nrows = -(-n // ncols)
+    panel_w = max(3.6, 0.75 * len(rows) + 1.4)
+    fig = Figure(figsize=(panel_w * ncols, 3.4 * nrows + 0.6))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    ours_color, paper_color = "#1f77b4", "#ff7f0e"
+    width = 0.38
+    xs = list(range(len(rows)))
+    for k, ax in enumerate(axes.flat):
+        if k >= len(cols):
+            ax.set_visible(False)
+            continue
+        col = cols[k]
         ours = [r["cells"][col]["ours"] for r in rows]
         paper = [r["cells"][col]["paper"] for r in rows]
         ax.bar(
-            xs_ours,
+            [x - width / 2 for x in xs],
             [o["sr"][0] if o else 0 for o in ours],
             width,
             yerr=[o["sr"][1] if o else 0 for o in ours],
-            color=colors[j % len(colors)],
-            label=f"{col} (ours)",
+            capsize=3,
+            color=ours_color,
+            label="ours (mean ± std over seeds)",
         )
-        for x, o in zip(xs_ours, ours):
-            if o is None:
-                ax.text(x, 0.5, "not run", rotation=90, ha="center", va="bottom", fontsize=7)
         ax.bar(
-            [x + width for x in xs_ours],
+            [x + width / 2 for x in xs],
             [p["sr"] if p else 0 for p in paper],
             width,
-            fill=False,
+            color="white",
             hatch="//",
-            edgecolor=colors[j % len(colors)],
-            label=f"{col} (paper)",
+            edgecolor=paper_color,
+            label="paper",
         )
-    ax.set_xticks(range(len(rows)), [r["name"] for r in rows])
-    ax.set_ylabel("SR (%)")
-    ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=7, ncol=max(1, n), loc="upper left")
+        for x, o, p in zip(xs, ours, paper):
+            if o is None:
+                ax.text(x - width / 2, 1, "not run", rotation=90, ha="center", va="bottom", fontsize=8)
+            if p is None:
+                ax.text(x + width / 2, 1, "n/a", rotation=90, ha="center", va="bottom", fontsize=8)
+        ax.set_xticks(
+            xs,
+            [r["name"] for r in rows],
+            rotation=30 if len(rows) > 3 else 0,
+            ha="right" if len(rows) > 3 else "center",
+        )
+        ax.set_title(str(col), fontsize=11)
+        ax.set_ylabel("SR (%)", fontsize=10)
+        ax.tick_params(labelsize=9)
+        ax.grid(axis="y", alpha=0.3)
+        ax.set_axisbelow(True)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.suptitle(title, fontsize=12)
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=10, bbox_to_anchor=(0.5, 0.0), frameon=False)
+    fig.tight_layout(rect=(0, 0.07 if nrows == 1 else 0.04, 1, 0.95))
     return _save(fig, out)
 
 
@@ -114,21 +136,25 @@ def training_curve(name: str, folder: Path, out: Path) -> Path | None:
     keys = [k for k in wanted if any(k in r for r in rows)]
     if not keys:
         return None
-    fig = Figure(figsize=(3.0 * len(keys), 2.8))
-    axes = fig.subplots(1, len(keys), squeeze=False)
-    for ax, key in zip(axes[0], keys):
+    ncols = min(3, len(keys))
+    nrows = -(-len(keys) // ncols)
+    fig = Figure(figsize=(3.8 * ncols, 3.2 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    for ax in list(axes.flat)[len(keys) :]:
+        ax.set_visible(False)
+    for ax, key in zip(axes.flat, keys):
         xs = [r["step"] for r in rows if key in r]
         ys = [r[key] for r in rows if key in r]
         ax.plot(xs, ys, lw=0.6, alpha=0.4, color="C0")
         k = max(1, len(ys) // 20)
         smooth = [sum(ys[max(0, i - k + 1) : i + 1]) / len(ys[max(0, i - k + 1) : i + 1]) for i in range(len(ys))]
         ax.plot(xs, smooth, lw=1.4, color="C0")
-        ax.set_title(key, fontsize=9)
-        ax.set_xlabel("env steps", fontsize=8)
-        # 300k-step runs in 3-inch panels: plain tick labels (100000150000...) run into each other
+        ax.set_title(key, fontsize=11)
+        ax.set_xlabel("env steps", fontsize=10)
+        # 300k-step runs in 3.8-inch panels: plain tick labels (100000150000...) run into each other
         ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.xaxis.set_major_formatter(EngFormatter(sep=""))
-        ax.tick_params(labelsize=7)
-    fig.suptitle(f"training: {name}", fontsize=10, y=1.02)
+        ax.tick_params(labelsize=10)
+    fig.suptitle(f"training: {name}", fontsize=12, y=1.02)
     fig.tight_layout()
     return _save(fig, out)

@@ -51,20 +51,39 @@ def plot_failures(name: str, records: list[dict], out: Path) -> Path:
     return out
 
 
+def distinct_colors(n: int) -> list:
+    """n colours no two alike: the tab10 / tab20 palettes while they last, then evenly spaced hues (the
+    default colour cycle repeats after 10, and a legend of 12 lines would name two lines by one colour)."""
+    import matplotlib
+
+    if n <= 10:
+        return list(matplotlib.colormaps["tab10"].colors[:n])
+    if n <= 20:
+        return list(matplotlib.colormaps["tab20"].colors[:n])
+    cmap = matplotlib.colormaps["turbo"]
+    return [cmap(i / (n - 1)) for i in range(n)]
+
+
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
 def plot_sr_vs_distance(runs: list[tuple[str, list[dict]]], out: Path) -> Path:
     labels = [distance_bin(lo) for lo in DISTANCE_BINS[:-1]]
-    fig = Figure(figsize=(7, 4))
-    ax = fig.subplots()
+    lines = []
     for name, recs in runs:
         table = sr_by(recs, lambda r: distance_bin(float(r["geodesic_distance"])))
-        for split in _ordered(table):
+        for k, split in enumerate(_ordered(table)):
             ys = [100 * table[split][lbl][0] if lbl in table[split] else float("nan") for lbl in labels]
-            ax.plot(labels, ys, marker="o", label=f"{name} / {split}")
+            lines.append((f"{name} / {split}", ys, MARKERS[k % len(MARKERS)]))
+    fig = Figure(figsize=(7, 4))
+    ax = fig.subplots()
+    for (label, ys, marker), color in zip(lines, distinct_colors(len(lines))):
+        ax.plot(labels, ys, marker=marker, color=color, label=label)
     ax.set_xlabel("geodesic distance start -> goal")
     ax.set_ylabel("SR (%)")
     ax.set_ylim(-2, 102)
     ax.tick_params(axis="x", labelrotation=30)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0)
     fig.savefig(out, dpi=120, bbox_inches="tight")
     return out
 
