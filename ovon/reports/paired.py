@@ -177,3 +177,29 @@ def paired_table(result: dict) -> str:
                 f"| {sign['b_wins']} / {sign['a_wins']} | {sign['p_value']:.3g} | {sr['verdict']} |"
             )
     return "\n".join(lines) + "\n"
+
+
+def min_detectable_diff(
+    n: int,
+    sd_d: float | None = None,
+    p_a: float | None = None,
+    p_b: float | None = None,
+    alpha: float = 0.05,
+    power: float = 0.8,
+) -> float:
+    """Minimum detectable SR difference (a fraction) of a paired comparison over n episodes.
+
+    MDE = (z_{1-alpha/2} + z_{power}) * sd_d / sqrt(n), two-sided, normal approximation, where sd_d is the
+    standard deviation of the per-episode paired difference d_i = s_A,i - s_B,i (success 0/1, averaged over
+    seeds per episode). Give sd_d when measured differences exist; else the planning form: with SRs p_a and
+    p_b, var(d) <= p_a(1-p_a) + p_b(1-p_b) (independent outcomes; positively correlated agents do better);
+    with neither, the conservative bound sd_d <= 1, so MDE <= 2.80 / sqrt(n) at alpha 0.05, power 0.8.
+    """
+    from statistics import NormalDist
+
+    if n <= 0:
+        raise ValueError(f"n must be positive, got {n}")
+    if sd_d is None:
+        sd_d = 1.0 if p_a is None or p_b is None else math.sqrt(p_a * (1 - p_a) + p_b * (1 - p_b))
+    z = NormalDist().inv_cdf(1 - alpha / 2) + NormalDist().inv_cdf(power)
+    return z * sd_d / math.sqrt(n)
