@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from ovon.cli.main import main as ovon
@@ -68,3 +69,29 @@ def test_cli_compares_real_runs_and_refuses_mismatched_ones(tiny_dataset, tiny_s
     err = capsys.readouterr().err.strip()
     assert "ran different episodes (3 only in random" in err and "\n" not in err
     assert ovon(["compare", str(tmp_path / "random6")]) == 2
+
+
+def test_each_split_states_the_difference_its_episodes_detect():
+    a, b = _records([1, 0] * 20), _records([0, 1] * 20)
+    (r, _all) = compare_pairs(pair_records(a, b, "A", "B"), resamples=500)
+    d = [-1.0, 1.0] * 20  # B - A per episode: sd 1.013, so MDE = 2.80 * 1.013 / sqrt(40)
+    assert r.mde == pytest.approx(2.8016 * np.std(d, ddof=1) / np.sqrt(40), rel=1e-3)
+    # identical runs: no spread to measure, so the planning value at their SR (60%) stands in
+    same = _records([1, 0, 1, 0, 1] * 4)
+    (r, _all) = compare_pairs(pair_records(same, same, "A", "A"), resamples=500)
+    assert r.mde == pytest.approx(2.8016 * np.sqrt(2 * 0.6 * 0.4) / np.sqrt(20), rel=1e-3)
+
+
+def test_the_table_names_the_mde_in_a_verdict_that_shows_no_difference(tiny_dataset, tiny_scenes, tmp_path):
+    from ovon.reports.paired import compare_runs, paired_table
+
+    common = ["--data", str(tiny_dataset), "--scenes", str(tiny_scenes), "--splits", "val_seen", "--seeds", "0"]
+    common += ["--workers", "1", "--no-progress", "--episodes", "4"]
+    for name in ("a", "b"):
+        assert ovon(["evaluate", "--agent", "shortest-path", *common, "--out", str(tmp_path / name)]) == 0
+    result = compare_runs([tmp_path / "a", tmp_path / "b"], resamples=200)
+    split = result["comparisons"][0]["splits"][0]
+    assert split["verdict"] == f"no difference shown (MDE {100 * split['mde']:.1f} pts)"
+    assert split["mde"] == pytest.approx(2.8016 / 2, rel=1e-3)  # both SR 100%: the worst case over 4 episodes
+    table = paired_table(result)
+    assert "| MDE SR | verdict (SR) |" in table and f"| {100 * split['mde']:.1f} | {split['verdict']} |" in table

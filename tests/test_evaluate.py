@@ -203,6 +203,8 @@ def test_cli_evaluate_report_and_video(tiny_dataset, tiny_scenes, tmp_path, caps
     assert ovon(["report", str(run), "--out", str(tmp_path / "rep")]) == 0
     for name in ("report.md", "sr_vs_distance.png", "failures_shortest-path.png", "sr_per_category_shortest-path.png"):
         assert (tmp_path / "rep" / name).stat().st_size > 0
+    report = (tmp_path / "rep" / "report.md").read_text()
+    assert "Power: with 3 episodes, a paired comparison detects an SR difference of 161.7 points at worst" in report
     ep = read_records(run)[0]
     assert (
         ovon(

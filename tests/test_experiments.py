@@ -723,6 +723,9 @@ def test_a_greater_check_with_a_margin_needs_the_gap_beyond_it() -> None:
     paired = {"diff": 4.0, "ci_low": 1.0, "ci_high": 7.0, "p": 0.01}
     out = judge_check(chk, lambda r, m: values[r], lambda a, b, m: paired)
     assert out["paired"]["verdict"] == "not shown (an interval includes 5)"
+    paired["mde"] = 8.25  # the detectable difference of those episodes: a verdict that is not shown names it
+    out = judge_check(chk, lambda r, m: values[r], lambda a, b, m: paired)
+    assert out["paired"]["verdict"] == "not shown (an interval includes 5; MDE 8.2 pts)"
 
 
 def test_a_verdict_that_differs_from_the_papers_carries_its_reason_or_says_it_has_none() -> None:
@@ -778,4 +781,8 @@ def test_table_marks_entries_whose_seeds_repeat_one_run() -> None:
     assert SAME_SEEDS not in "\n".join(table_markdown(table))
     ours["seeds_identical"] = True
     text = "\n".join(table_markdown(table))
-    assert f"**82.0 ± 0.0**{SAME_SEEDS} (paper –)" in text and SAME_SEEDS_NOTE in text
+    assert f"**82.0{SAME_SEEDS}** (paper –)" in text and SAME_SEEDS_NOTE in text and "± 0.0" not in text
+    # 100 distinct episodes (400 records over 4 seeds): the table names what they can detect
+    assert "100 episodes x 4 seeds per entry" in text and "detects an SR difference of 28.0 points at worst" in text
+    ours["seeds"], ours["episodes"] = 1, 100
+    assert "**82.0 (1 seed)** (paper –)" in "\n".join(table_markdown(table))

@@ -73,8 +73,13 @@ def test_tables_show_unfinished_cells_upper_bounds_and_verdicts(tmp_path: Path) 
 def test_seeds_that_ran_the_same_episodes_are_marked(tmp_path: Path) -> None:
     _report(tmp_path, {"sr": [30.0, 0.0], "spl": [10.0, 0.0], "seeds": 4, "seeds_identical": True})
     text = headline(tmp_path)
-    assert f"| **30.0** ± 0.0{SAME_SEEDS} (41.3) |" in text
-    assert SAME_SEEDS_NOTE in text and "| **80.0** ± 0.0 |" in text
+    assert f"| **30.0**{SAME_SEEDS} (41.3) |" in text and "± 0.0" not in text.replace("**80.0** ± 0.0", "")
+    assert SAME_SEEDS_NOTE in text and "| **80.0** ± 0.0 |" in text  # no mark: seeds not compared
+
+
+def test_one_seed_prints_no_spread(tmp_path: Path) -> None:
+    _report(tmp_path, {"sr": [30.0, 0.0], "spl": [10.0, 0.0], "seeds": 1})
+    assert "| **30.0** (1 seed) (41.3) |" in headline(tmp_path)
 
 
 def test_write_then_check_and_clear_errors(tmp_path: Path) -> None:

@@ -17,8 +17,8 @@ class CompareArgs:
 def register(sub) -> None:
     p = sub.add_parser(
         "compare",
-        help="paired comparison of runs on the same episodes: SR/SPL differences with bootstrap 95%% intervals "
-        "and a sign test",
+        help="paired comparison of runs on the same episodes: SR/SPL differences with bootstrap 95%% intervals, "
+        "a sign test and the SR difference the episodes can detect (MDE, 80%% power)",
     )
     p.add_argument("runs", nargs="+", help="run folders of `ovon evaluate`; the first is the baseline A")
     p.add_argument("--resamples", help="bootstrap resamples (default 10000)")

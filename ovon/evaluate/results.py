@@ -271,6 +271,26 @@ def coverage_lines(splits: dict[str, dict]) -> list[str]:
     return out
 
 
+def spread_text(
+    mean: float, std: float, seeds: int, identical: bool = False, identical_mark: str = "", bold: bool = False
+) -> str:
+    """'mean ± std' over seeds, in the value's unit (one decimal; `bold`: the mean in markdown bold). One seed,
+    or seeds that all ran to the same ends, have a std of 0 that measures nothing, so no ± is printed:
+    "(1 seed)", or `identical_mark` (a table whose note explains it) or "(seeds agree)"."""
+    head = f"**{mean:.1f}**" if bold else f"{mean:.1f}"
+    if seeds < 2:
+        return f"{head} (1 seed)"
+    if identical:
+        return head + (identical_mark or " (seeds agree)")
+    return f"{head} ± {std:.1f}"
+
+
+def entry_text(entry: dict, metric: str) -> str:
+    """A `summarize` entry's metric in % as tables print it (`spread_text`)."""
+    m, sd = entry[metric]["mean"], entry[metric]["std"]
+    return spread_text(100 * m, 100 * sd, len(entry["seeds"]), bool(entry.get("seeds_identical")))
+
+
 def paper_table(rows: dict[str, dict], splits: tuple[str, ...] = VAL_SPLITS) -> str:
     """Markdown table: rows = agents, columns = SR and SPL per split (mean ± std over seeds, in %)."""
     present = [s for s in splits if any(s in summ for summ in rows.values())]
@@ -285,8 +305,6 @@ def paper_table(rows: dict[str, dict], splits: tuple[str, ...] = VAL_SPLITS) -> 
             if s not in summ:
                 cells += ["–", "–"]
                 continue
-            for metric in ("sr", "spl"):
-                m, sd = summ[s][metric]["mean"], summ[s][metric]["std"]
-                cells.append(f"{100 * m:.1f} ± {100 * sd:.1f}")
+            cells += [entry_text(summ[s], metric) for metric in ("sr", "spl")]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)

@@ -15,17 +15,21 @@ from ovon.experiments.definitions import Check, Finding, parse_ref
 Value = tuple[float, float]  # (mean, std) in %
 Lookup = Callable[[str, str], Value | None]  # (ref, metric) -> value, None when not run
 # (ref a, ref b, metric) -> the paired difference a - b on their shared episodes, in % points:
-# {"diff", "ci_low", "ci_high", "p"}; None when the two did not run the same episodes (or did not run)
+# {"diff", "ci_low", "ci_high", "p", "mde"}; None when the two did not run the same episodes (or did not run);
+# mde: the SR difference those episodes detect (paired, 95%, 80% power), in % points
 Paired = Callable[[str, str, str], dict | None]
 PAIRED_NOTE = (
     "paired: the per-episode difference on the episodes both ran, with a 95% bootstrap interval over episodes; "
-    "a comparison holds when its interval excludes 0 in the claimed direction"
+    "a comparison holds when its interval excludes 0 in the claimed direction; a verdict of not shown names the "
+    "minimum detectable SR difference (MDE: paired, 95%, 80% power) of those episodes, below which a real "
+    "difference would mostly go unseen"
 )
 
 SAME_SEEDS = "‡"
 SAME_SEEDS_NOTE = (
     f"{SAME_SEEDS} every evaluation seed ran each episode to the same end (a deterministic agent, no noise): "
-    "its ± 0.0 is one run repeated, not a measure of uncertainty; the paired intervals are over episodes"
+    "its std over seeds is 0 by construction and measures nothing, so none is printed; the paired intervals "
+    "and detectable differences of the findings are over episodes"
 )
 
 
@@ -87,7 +91,9 @@ def paired_check(chk: Check, paired: Paired | None) -> dict | None:
     elif any(st["ci_high"] < chk.margin for st in stats):
         verdict = "does not hold"
     else:
-        verdict = f"not shown (an interval includes {chk.margin:g})"
+        mdes = [st["mde"] for st in stats if "mde" in st]
+        named = f"; MDE {max(mdes):.1f} pts" if mdes else ""  # the largest: the comparison that decides it
+        verdict = f"not shown (an interval includes {chk.margin:g}{named})"
     sign = " (SR sign test p {p:.2g})" if chk.metric == "sr" else ""
     numbers = "; ".join(f"{a} - {b} {interval_text(st)}" + sign.format(p=st["p"]) for (a, b), st in zip(pairs, stats))
     return {"verdict": verdict, "numbers": numbers}

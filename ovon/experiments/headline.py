@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from ovon.evaluate.results import spread_text
 from ovon.experiments.definitions import experiment_names
 from ovon.experiments.findings import SAME_SEEDS, same_seeds_lines
 from ovon.experiments.provenance import headline as provenance_line
@@ -40,8 +41,11 @@ def _load(results: Path, name: str, folder: str = "") -> dict:
 def _entry(cell: dict) -> str:
     ours = cell.get("ours")
     paper = cell.get("paper")
-    same = SAME_SEEDS if ours and ours.get("seeds_identical") else ""
-    text = "not run" if ours is None else f"**{ours['sr'][0]:.1f}** ± {ours['sr'][1]:.1f}{same}"
+    if ours is None:
+        text = "not run"
+    else:
+        identical = bool(ours.get("seeds_identical"))
+        text = spread_text(*ours["sr"], ours.get("seeds", 2), identical, SAME_SEEDS, bold=True)
     return text + (f" ({paper['sr']:.1f})" if paper else "")
 
 

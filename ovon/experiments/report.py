@@ -17,6 +17,7 @@ from typing import Any
 
 from ovon.atomic import atomic_write_text, write_json
 from ovon.config.base import to_dict
+from ovon.evaluate.results import spread_text
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, Finding, paper_numbers, parse_ref, row_eval
 from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, SAME_SEEDS, fill_sentence, judge, same_seeds_lines
@@ -40,6 +41,7 @@ from ovon.experiments.tokens import (
     portable_text,
     shell_word,
 )
+from ovon.reports.power import mde_sentence
 from ovon.runfolder import flatten
 
 
@@ -273,7 +275,13 @@ def paired_difference(evals: dict[str, dict], a: dict, b: dict, metric: str) -> 
     except ValueError:  # different episodes: nothing to pair
         return None
     st = next(s for s in result.stats if s.metric == metric)
-    return {"diff": 100 * st.diff, "ci_low": 100 * st.ci_low, "ci_high": 100 * st.ci_high, "p": result.sign.p_value}
+    return {
+        "diff": 100 * st.diff,
+        "ci_low": 100 * st.ci_low,
+        "ci_high": 100 * st.ci_high,
+        "p": result.sign.p_value,
+        "mde": 100 * result.mde,  # SR's, whatever the metric: the finding's verdict names it
+    }
 
 
 def run_command_line(plan: Plan) -> str:
@@ -334,8 +342,12 @@ def wall_text(info: dict) -> str:
     return f"{info['wall_min']}" + (f" (+ {n} killed attempt{'s' * (n > 1)}, time not recorded)" if n else "")
 
 
-def fmt(value: tuple[float, float] | None) -> str:
-    return "–" if value is None else f"{value[0]:.1f} ± {value[1]:.1f}"
+def fmt(ours: dict | None, metric: str) -> str:
+    """Our entry's mean ± std over seeds; without the ± where it measures nothing (`spread_text`)."""
+    if ours is None:
+        return "–"
+    m, sd = ours[metric]
+    return spread_text(m, sd, ours.get("seeds", 2), bool(ours.get("seeds_identical")), SAME_SEEDS)
 
 
 def fmt_paper(p: dict | None, metric: str) -> str:
@@ -360,8 +372,8 @@ def table_markdown(table: dict) -> list[str]:
                     cells.append(f"not run (paper {paper})")
                     notes.setdefault(e["eval"], e["status"])
                 else:
-                    mark = (MARK if e.get("marked") else "") + (SAME_SEEDS if e["ours"].get("seeds_identical") else "")
-                    cells.append(f"**{fmt(e['ours'][m])}**{mark} (paper {paper})")
+                    mark = MARK if e.get("marked") else ""
+                    cells.append(f"**{fmt(e['ours'], m)}**{mark} (paper {paper})")
         lines.append(f"| {row['name']} | {row['setup']} | " + " | ".join(cells) + " |")
     if notes:
         lines.append("")
@@ -373,15 +385,18 @@ def table_markdown(table: dict) -> list[str]:
             'dirty tree (table "Provenance").',
         ]
     lines += same_seeds_lines(table["rows"])
-    counts = {
-        (e["ours"]["episodes"], e["ours"]["seeds"]) for r in table["rows"] for e in r["cells"].values() if e["ours"]
-    }
+    done = [e["ours"] for r in table["rows"] for e in r["cells"].values() if e["ours"]]
+    counts = {(o["episodes"], o["seeds"]) for o in done}
     if counts:
+        # every seed runs the same episodes: a paired comparison has episodes / seeds of them
+        fewest = min(n // max(s, 1) for n, s in counts)
+        sr = sum(o["sr"][0] for o in done) / len(done) / 100
         lines.append("")
         lines.append(
             "Ours: "
-            + ", ".join(f"{n} episodes over {s} seeds" for n, s in sorted(counts))
-            + " per entry; mean ± std over seeds. Paper: as printed (3 seeds)."
+            + ", ".join(f"{n // max(s, 1)} episodes x {s} seeds" for n, s in sorted(counts))
+            + f" per entry; mean ± std over seeds. Paper: as printed (3 seeds). Power: {mde_sentence(fewest, sr)}; "
+            "each finding's paired verdict states its own."
         )
     return lines
 

@@ -7,8 +7,9 @@ from collections import defaultdict
 from pathlib import Path
 
 from ovon.dataset.io import VAL_SPLITS
-from ovon.evaluate.results import coverage_lines, paper_table, selected_records, summarize
+from ovon.evaluate.results import coverage_lines, entry_text, paper_table, selected_records, summarize
 from ovon.reports.labels import agent_label, noise_label
+from ovon.reports.power import mde_sentence
 from ovon.task.tracker import FAILURE_LABELS
 
 
@@ -105,8 +106,7 @@ def noise_table(rows: list[tuple[str, str, dict]]) -> str:
                     if s not in summ:
                         cells.append("–")
                         continue
-                    m, sd = summ[s][metric]["mean"], summ[s][metric]["std"]
-                    cells.append(f"{100 * m:.1f} ± {100 * sd:.1f}")
+                    cells.append(entry_text(summ[s], metric))
             lines.append(f"| {label} | {'✓ ' + noise if noise else '–'} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -118,6 +118,13 @@ def markdown_report(
     `skipped` (`load_skipped` per run) lists the episodes each run skipped before it ran."""
     rows = {name: summarize(recs) for name, recs in runs}
     parts = ["# ovon evaluation report", "", "## SR / SPL (%), mean ± std over seeds", "", paper_table(rows), ""]
+    per_seed = [e["seeds"][k]["episodes"] for summ in rows.values() for e in summ.values() for k in e["seeds"]]
+    if per_seed:
+        srs = [e["sr"]["mean"] for summ in rows.values() for e in summ.values()]
+        parts += [
+            f"Power: {mde_sentence(min(per_seed), sum(srs) / len(srs))} (`ovon compare` measures it for two runs).",
+            "",
+        ]
     notes = [f"- {name}, {line}" for (name, _), lines in zip(runs, skipped or []) for line in lines]
     if notes:
         parts += ["Episodes skipped before the run (the numbers above cover the others):", "", *notes, ""]

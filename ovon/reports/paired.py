@@ -19,6 +19,7 @@ from scipy.stats import binomtest
 
 from ovon.evaluate.results import selected_records
 from ovon.reports.compare import load_meta, load_protocol
+from ovon.reports.power import measured_mde
 
 METRICS = ("sr", "spl")
 ALL = "(all splits)"  # the pooled row: parentheses cannot be in a split name
@@ -60,6 +61,7 @@ class PairedResult:
     seeds: int
     stats: tuple[PairedStat, ...]
     sign: SignTest
+    mde: float  # the SR difference (a fraction) these episodes detect at 95% / 80% power (`ovon.reports.power`)
 
 
 def _episode(r: dict) -> tuple[str, str, str]:
@@ -113,7 +115,8 @@ def compare_pairs(
                 b_wins, a_wins = int((d > 0).sum()), int((d < 0).sum())
                 p = binomtest(b_wins, b_wins + a_wins, 0.5).pvalue if b_wins + a_wins else 1.0
                 sign = SignTest(b_wins, a_wins, float(p))
-        out.append(PairedResult(split, len(episodes), len(episodes[0]) if episodes else 0, tuple(stats), sign))
+                mde = measured_mde(d.tolist(), float(va.mean()), float(vb.mean()))
+        out.append(PairedResult(split, len(episodes), len(episodes[0]) if episodes else 0, tuple(stats), sign, mde))
     return out
 
 
@@ -141,6 +144,7 @@ def compare_runs(run_dirs: list[str | Path], resamples: int = 10_000) -> dict:
                     {
                         **{k: v for k, v in asdict(r).items() if k != "stats"},
                         "stats": [{**asdict(s), "verdict": s.verdict} for s in r.stats],
+                        "verdict": verdict_text(r.stats[0].verdict, r.mde),
                     }
                     for r in results
                 ],
@@ -149,15 +153,22 @@ def compare_runs(run_dirs: list[str | Path], resamples: int = 10_000) -> dict:
     return {"baseline": names[0], "resamples": resamples, "level": 0.95, "comparisons": comparisons}
 
 
+def verdict_text(verdict: str, mde: float) -> str:
+    """The SR verdict as tables print it: "no difference shown" names the difference it could have shown."""
+    return f"{verdict} (MDE {100 * mde:.1f} pts)" if verdict == "no difference shown" else verdict
+
+
 def paired_table(result: dict) -> str:
     """Markdown: one row per (B, split), differences in % points with their 95% interval."""
     lines = [
         f"Paired differences B - A against A = {result['baseline']}, in % points; 95% bootstrap interval over "
-        f"episodes ({result['resamples']} resamples); sign test on episodes where SR differs.",
+        f"episodes ({result['resamples']} resamples); sign test on episodes where SR differs; MDE: the smallest "
+        "SR difference these episodes detect (paired, 95%, 80% power, from the measured spread of the "
+        "per-episode difference).",
         "",
         "| B | split | episodes x seeds | SR A | SR B | dSR [95% CI] | SPL A | SPL B | dSPL [95% CI] | B / A wins "
-        "| p | verdict (SR) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| p | MDE SR | verdict (SR) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     pct = lambda x: f"{100 * x:.1f}"  # noqa: E731
     for comp in result["comparisons"]:
@@ -174,32 +185,6 @@ def paired_table(result: dict) -> str:
                 f"| {comp['b']} | {s['split']} | {s['episodes']} x {s['seeds']} | {pct(sr['a'])} | {pct(sr['b'])} | "
                 f"{100 * sr['diff']:+.1f} [{100 * sr['ci_low']:+.1f}, {100 * sr['ci_high']:+.1f}] | {pct(spl['a'])} | "
                 f"{pct(spl['b'])} | {100 * spl['diff']:+.1f} [{100 * spl['ci_low']:+.1f}, {100 * spl['ci_high']:+.1f}] "
-                f"| {sign['b_wins']} / {sign['a_wins']} | {sign['p_value']:.3g} | {sr['verdict']} |"
+                f"| {sign['b_wins']} / {sign['a_wins']} | {sign['p_value']:.3g} | {pct(s['mde'])} | {s['verdict']} |"
             )
     return "\n".join(lines) + "\n"
-
-
-def min_detectable_diff(
-    n: int,
-    sd_d: float | None = None,
-    p_a: float | None = None,
-    p_b: float | None = None,
-    alpha: float = 0.05,
-    power: float = 0.8,
-) -> float:
-    """Minimum detectable SR difference (a fraction) of a paired comparison over n episodes.
-
-    MDE = (z_{1-alpha/2} + z_{power}) * sd_d / sqrt(n), two-sided, normal approximation, where sd_d is the
-    standard deviation of the per-episode paired difference d_i = s_A,i - s_B,i (success 0/1, averaged over
-    seeds per episode). Give sd_d when measured differences exist; else the planning form: with SRs p_a and
-    p_b, var(d) <= p_a(1-p_a) + p_b(1-p_b) (independent outcomes; positively correlated agents do better);
-    with neither, the conservative bound sd_d <= 1, so MDE <= 2.80 / sqrt(n) at alpha 0.05, power 0.8.
-    """
-    from statistics import NormalDist
-
-    if n <= 0:
-        raise ValueError(f"n must be positive, got {n}")
-    if sd_d is None:
-        sd_d = 1.0 if p_a is None or p_b is None else math.sqrt(p_a * (1 - p_a) + p_b * (1 - p_b))
-    z = NormalDist().inv_cdf(1 - alpha / 2) + NormalDist().inv_cdf(power)
-    return z * sd_d / math.sqrt(n)
