@@ -14,7 +14,8 @@ Inputs (nothing is downloaded at run time):
 
 Baselines in the same run: geodesics from the distance field with the fast-marching front started at
 0.75 cells (the seeding before this change) and at `SEED_CIRCLE_CELLS` (now), and the 3D length of the
-string-pulled path; each at every cell size.
+string-pulled path; each at every cell size; and `navmesh`, habitat's own polygon A* and funnel
+(`ovon.sim.navmesh.pathfind`), which needs no grid (repeated per cell size, identical).
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ def _geodesics(sn, golden: dict) -> dict:
         geodesic.SEED_CIRCLE_CELLS = now
         geodesic.clear_cache()
     out["path"] = geodesic_agreement(sn, golden, "path")
+    out["navmesh"] = geodesic_agreement(sn, golden, "navmesh")  # polygon A* + funnel, the default here
     return out
 
 
@@ -121,8 +123,9 @@ def _print(res: dict) -> None:
             print(line)
             for label, g in cell.get("geodesic", {}).items():
                 print(
-                    f"    geodesic {label}: mean rel err {100 * g['mean_rel_error']:.2f}% (max "
-                    f"{100 * g['max_rel_error']:.2f}%, mean abs {100 * g['mean_abs_error_m']:.2f} cm), reachability "
+                    f"    geodesic {label}: rel err mean {100 * g['mean_rel_error']:.3f}%, median "
+                    f"{100 * g['median_rel_error']:.3f}%, p95 {100 * g['p95_rel_error']:.3f}%, max "
+                    f"{100 * g['max_rel_error']:.3f}% (mean abs {100 * g['mean_abs_error_m']:.2f} cm), reachability "
                     f"{g['reachability_agrees']}/{g['pairs']} ({g['habitat_unreachable']} unreachable in habitat)"
                 )
             if "trajectory" in cell:

@@ -21,6 +21,7 @@ import skfmm
 from numba import njit
 
 from ovon.lru import LRU
+from ovon.sim.heap import heap_pop, heap_push
 from ovon.sim.los import los_between
 from ovon.sim.navgrid import NavGrid, SceneNav
 
@@ -79,37 +80,9 @@ def _dijkstra16(nav, init, cs):
     for r in range(rows):
         for c in range(cols):
             if math.isfinite(dist[r, c]):
-                # push
-                k = n
-                hk[k] = dist[r, c]
-                hi[k] = r * cols + c
-                n += 1
-                while k > 0:
-                    p = (k - 1) // 2
-                    if hk[p] <= hk[k]:
-                        break
-                    hk[p], hk[k] = hk[k], hk[p]
-                    hi[p], hi[k] = hi[k], hi[p]
-                    k = p
+                n = heap_push(hk, hi, n, dist[r, c], r * cols + c)
     while n > 0:
-        d = hk[0]
-        idx = hi[0]
-        n -= 1
-        hk[0] = hk[n]
-        hi[0] = hi[n]
-        k = 0
-        while True:
-            l = 2 * k + 1
-            if l >= n:
-                break
-            m = l
-            if l + 1 < n and hk[l + 1] < hk[l]:
-                m = l + 1
-            if hk[k] <= hk[m]:
-                break
-            hk[m], hk[k] = hk[k], hk[m]
-            hi[m], hi[k] = hi[k], hi[m]
-            k = m
+        d, idx, n = heap_pop(hk, hi, n)
         r = idx // cols
         c = idx % cols
         if done[r, c]:
@@ -125,17 +98,7 @@ def _dijkstra16(nav, init, cs):
             nd = d + cs * math.sqrt(dr * dr + dc * dc)
             if nd < dist[r2, c2] and n < cap:
                 dist[r2, c2] = nd
-                k = n
-                hk[k] = nd
-                hi[k] = r2 * cols + c2
-                n += 1
-                while k > 0:
-                    p = (k - 1) // 2
-                    if hk[p] <= hk[k]:
-                        break
-                    hk[p], hk[k] = hk[k], hk[p]
-                    hi[p], hi[k] = hi[k], hi[p]
-                    k = p
+                n = heap_push(hk, hi, n, nd, r2 * cols + c2)
     return dist
 
 
@@ -444,19 +407,36 @@ def distance_field(
     return _CACHE.get(key, make)
 
 
-def geodesic_distance(nav: SceneNav, a, b, how: str = "field") -> float:
-    """Geodesic distance between two points; inf on different floors or when unreachable. `how`:
-    "field" (the distance field, what episodes and metrics use) or "path" (3D length of the
-    string-pulled path, `DistanceField.path_length`)."""
-    if how not in ("field", "path"):
-        raise ValueError(f"unknown geodesic measure {how!r} (field | path)")
+GEODESIC_MEASURES = ("auto", "navmesh", "field", "path")
+
+
+def geodesic_distance(nav: SceneNav, a, b, how: str = "auto") -> float:
+    """Geodesic distance from a to b ((3,) or (K, 3) goals: the nearest); inf when unreachable. `how`:
+    "navmesh" (habitat's own answer on the navmesh the scene was read from: polygon A* and funnel,
+    `ovon.sim.navmesh.pathfind`; exact on habitat's golden geodesics), "field" (the distance field, what
+    episodes and metrics use), "path" (3D length of the string-pulled grid path); "auto": "navmesh" when
+    the scene came from a navmesh file, else "field"."""
+    if how not in GEODESIC_MEASURES:
+        raise ValueError(f"unknown geodesic measure {how!r} ({' | '.join(GEODESIC_MEASURES)})")
+    goals = np.asarray(b, dtype=np.float64).reshape(-1, 3)
+    from_navmesh = nav.source.endswith(".navmesh")
+    if how == "navmesh" and not from_navmesh:
+        raise ValueError(
+            f"geodesic measure 'navmesh' needs a scene read from a habitat navmesh, got one built from {nav.source!r}; "
+            "fix: load it with ovon.sim.navmesh.load_navmesh or use how='field'"
+        )
+    if how == "navmesh" or (how == "auto" and from_navmesh):
+        from ovon.sim.navmesh.pathfind import path_finder
+
+        return path_finder(nav.source).geodesic_distance(a, goals)
     if not nav.floors:
         return math.inf
     fa = nav.floor_index(a)
-    if fa != nav.floor_index(b):
+    same = np.array([nav.floor_index(g) == fa for g in goals], dtype=bool)
+    if not same.any():
         return math.inf
-    f = distance_field(nav.floors[fa], np.asarray(b, dtype=np.float64)[None])
-    return f.distance(a) if how == "field" else f.path_length(a)
+    f = distance_field(nav.floors[fa], goals[same])
+    return f.distance(a) if how in ("field", "auto") else f.path_length(a)
 
 
 def clear_cache() -> None:

@@ -25,8 +25,10 @@ HABITAT_AGENT = AgentConfig(radius=0.1, height=1.5, max_climb=0.2, forward_step=
 
 
 def _distance(sn: SceneNav, start: np.ndarray, goals: np.ndarray, how: str) -> float:
-    from ovon.sim.geodesic import distance_field
+    from ovon.sim.geodesic import distance_field, geodesic_distance
 
+    if how == "navmesh":
+        return geodesic_distance(sn, start, goals, how="navmesh")
     if not sn.floors:
         return math.inf
     fi = sn.floor_index(start)
@@ -39,7 +41,7 @@ def _distance(sn: SceneNav, start: np.ndarray, goals: np.ndarray, how: str) -> f
 
 def geodesic_agreement(sn: SceneNav, golden: dict, how: str = "field") -> dict[str, Any]:
     """habitat-lab's geodesic golden file ({"single_end": [{start, end, expected}], "multi_end": [{start,
-    ends, expected}]}) against ovon's distance (`how`: "field" or "path", see `geodesic_distance`)."""
+    ends, expected}]}) against ovon's distance (`how`: "navmesh", "field" or "path", see `geodesic_distance`)."""
     rows = []
     for kind, key in (("single", "end"), ("multi", "ends")):
         for case in golden.get(f"{kind}_end", []):
@@ -56,6 +58,8 @@ def geodesic_agreement(sn: SceneNav, golden: dict, how: str = "field") -> dict[s
         "habitat_unreachable": int((~np.isfinite(hab)).sum()),
         "reachability_agrees": int((np.isfinite(hab) == np.isfinite(our)).sum()),
         "mean_rel_error": float(rel.mean()) if len(rel) else math.nan,
+        "median_rel_error": float(np.median(rel)) if len(rel) else math.nan,
+        "p95_rel_error": float(np.quantile(rel, 0.95)) if len(rel) else math.nan,
         "max_rel_error": float(rel.max()) if len(rel) else math.nan,
         "mean_abs_error_m": float(np.abs(our[both] - hab[both]).mean()) if len(rel) else math.nan,
         "rows": [{"kind": r["kind"], "habitat": r["habitat"] if math.isfinite(r["habitat"]) else None,

@@ -149,24 +149,43 @@ def _overlap_slabs(amin, amax, bmin, bmax, px: float, py: float) -> bool:  # noq
 _SIDE_STEP = {0: (1, 0), 1: (1, 1), 2: (0, 1), 3: (-1, 1), 4: (-1, 0), 5: (-1, -1), 6: (0, -1), 7: (1, -1)}
 
 
-def _portals(tile: NavMeshTile) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
-    """(polygon, side, va, vb) of every portal edge of a tile."""
+def _portals(tile: NavMeshTile) -> list[tuple[int, int, np.ndarray, np.ndarray, int]]:
+    """(polygon, side, va, vb, edge) of every portal edge of a tile."""
     out = []
     for k, p in enumerate(tile.polys):
         n = int(p["vert_count"])
         for j in range(n):
             nei = int(p["neis"][j])
             if nei & EXT_LINK:
-                out.append((k, nei & 0xFF, tile.verts[p["verts"][j]], tile.verts[p["verts"][(j + 1) % n]]))
+                out.append((k, nei & 0xFF, tile.verts[p["verts"][j]], tile.verts[p["verts"][(j + 1) % n]], j))
     return out
 
 
+@dataclass
+class Links:
+    """Detour's links: source and target global polygon ids, the source polygon's edge they cross, and the
+    part of that edge (tmin..tmax of 0..1, Detour's bmin / bmax over 255) the link spans."""
+
+    src: np.ndarray
+    dst: np.ndarray
+    edge: np.ndarray
+    tmin: np.ndarray
+    tmax: np.ndarray
+
+
 def links(mesh: NavMesh, pidx: PolyIndex | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Detour's links as (source, target) global polygon ids: internal neighbours (`neis`), then
-    polygons across tile borders matched as `dtNavMesh::connectExtLinks` does."""
+    """Detour's links as (source, target) global polygon ids (`portal_links`)."""
+    ln = portal_links(mesh, pidx)
+    return ln.src, ln.dst
+
+
+def portal_links(mesh: NavMesh, pidx: PolyIndex | None = None) -> Links:
+    """Detour's links: internal neighbours (`neis`), then polygons across tile borders matched as
+    `dtNavMesh::connectExtLinks` does (with the overlap it clamps the portal to)."""
     pidx = pidx or poly_index(mesh)
     src: list[np.ndarray] = []
     dst: list[np.ndarray] = []
+    edges: list[np.ndarray] = []
     slot = {ti: i for i, ti in enumerate(pidx.order)}
     for i, ti in enumerate(pidx.order):
         p = mesh.tiles[ti].polys
@@ -176,15 +195,18 @@ def links(mesh: NavMesh, pidx: PolyIndex | None = None) -> tuple[np.ndarray, np.
         k, j = np.nonzero(used & ground & (nei != 0) & ((nei & EXT_LINK) == 0))
         src.append(k + pidx.base[i])
         dst.append(nei[k, j] - 1 + pidx.base[i])
+        edges.append(j)
     at: dict[tuple[int, int], list[int]] = {}
     for ti, t in enumerate(mesh.tiles):
         at.setdefault((t.x, t.y), []).append(ti)
     portals = {ti: _portals(mesh.tiles[ti]) for ti in range(len(mesh.tiles))} if len(mesh.tiles) > 1 else {}
     ext_s: list[int] = []
     ext_d: list[int] = []
+    ext_e: list[int] = []
+    ext_t: list[tuple[float, float]] = []
     for ti, t in enumerate(mesh.tiles if len(mesh.tiles) > 1 else []):
         base = int(pidx.base[slot[ti]])
-        for k, side, va, vb in portals[ti]:
+        for k, side, va, vb, j in portals[ti]:
             dx, dy = _SIDE_STEP.get(side, (0, 0))
             targets = [u for u in at.get((t.x + dx, t.y + dy), []) if u != ti]
             targets += [u for u in at.get((t.x, t.y), []) if u != ti and (dx, dy) != (0, 0)]
@@ -193,7 +215,7 @@ def links(mesh: NavMesh, pidx: PolyIndex | None = None) -> tuple[np.ndarray, np.
             for u in targets:
                 tu = mesh.tiles[u]
                 seen = set()
-                for m, s2, vc, vd in portals[u]:
+                for m, s2, vc, vd, _ in portals[u]:
                     if s2 != opposite or m in seen:
                         continue
                     bpos, bmin, bmax = _slab(vc, vd, side)
@@ -202,9 +224,26 @@ def links(mesh: NavMesh, pidx: PolyIndex | None = None) -> tuple[np.ndarray, np.
                     seen.add(m)  # findConnectingPolys takes one edge per polygon
                     ext_s.append(base + k)
                     ext_d.append(int(pidx.base[slot[u]]) + m)
+                    ext_e.append(j)
+                    # the overlap along the border, as a fraction of this edge (connectExtLinks' bmin / bmax)
+                    axis = 2 if side in (0, 4) else 0
+                    span = float(vb[axis] - va[axis])
+                    lo, hi = max(amin[0], bmin[0]), min(amax[0], bmax[0])
+                    t0, t1 = ((lo - va[axis]) / span, (hi - va[axis]) / span) if span else (0.0, 1.0)
+                    t0, t1 = (round(min(max(t, 0.0), 1.0) * 255) / 255 for t in sorted((t0, t1)))
+                    ext_t.append((t0, t1))
     src.append(np.asarray(ext_s, np.int64))
     dst.append(np.asarray(ext_d, np.int64))
-    return np.concatenate(src).astype(np.int64), np.concatenate(dst).astype(np.int64)
+    edges.append(np.asarray(ext_e, np.int64))
+    n_int = sum(len(e) for e in edges[:-1])
+    tt = np.asarray(ext_t, np.float64).reshape(-1, 2)
+    return Links(
+        src=np.concatenate(src).astype(np.int64),
+        dst=np.concatenate(dst).astype(np.int64),
+        edge=np.concatenate(edges).astype(np.int64),
+        tmin=np.concatenate([np.zeros(n_int), tt[:, 0]]),
+        tmax=np.concatenate([np.ones(n_int), tt[:, 1]]),
+    )
 
 
 def compute_islands(mesh: NavMesh) -> Islands:

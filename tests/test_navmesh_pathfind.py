@@ -1,0 +1,86 @@
+"""Polygon shortest paths on habitat navmeshes: habitat's own golden geodesics, and known geometry."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ovon.sim.navmesh import read_navmesh
+from ovon.sim.navmesh.pathfind import PathFinder
+from tests.navmesh_files import grid_polys, make_navmesh, make_tile, rect
+
+FIX = Path(__file__).parent / "fixtures" / "habitat"
+
+
+def test_habitat_golden_geodesics_are_reproduced_exactly():
+    pf = PathFinder(read_navmesh(FIX / "van-gogh-room.navmesh"))
+    gold = json.loads((FIX / "test-sim-geodesic-distance-test-golden.json").read_text())
+    cases = [(c["start"], c["end"], c["expected"]) for c in gold["single_end"]]
+    cases += [(c["start"], c["ends"], c["expected"]) for c in gold["multi_end"]]
+    assert len(cases) == 20
+    for start, ends, expected in cases:
+        ours = pf.geodesic_distance(start, ends)
+        assert math.isfinite(ours) == math.isfinite(float(expected))
+        if math.isfinite(ours):
+            assert ours == pytest.approx(float(expected), rel=1e-5)  # float32 files: habitat's own rounding
+
+
+def test_open_floor_paths_are_straight_and_corners_are_cut_exactly():
+    strip = PathFinder(make_navmesh([make_tile(grid_polys(0, 0, 4, 0.5, 0.5))]))  # one row of squares
+    assert strip.geodesic_distance([0.3, 0.0, 0.1], [3.7, 0.0, 0.4]) == pytest.approx(math.hypot(3.4, 0.3), abs=1e-5)
+    # on a grid of small squares Detour's corridor (A* over portal midpoints) can miss the straight line and
+    # the funnel then bends at a vertex, as in habitat: never shorter than the straight line, barely longer
+    pf = PathFinder(make_navmesh([make_tile(grid_polys(0, 0, 4, 4, 0.5))]))
+    d, e = pf.geodesic_distance([0.3, 0.0, 0.2], [3.7, 0.0, 3.1]), math.hypot(3.4, 2.9)
+    assert e - 1e-6 <= d <= 1.005 * e
+    # an L: the bar x in [0, 4], z in [0, 1] and the leg x in [3, 4], z in [1, 4]; from (0.5, 0.5) to (3.5, 3.5)
+    # the shortest path bends once, at the inner corner (3, 1)
+    polys = [rect(0, 0, 3, 1), rect(3, 0, 4, 1), rect(3, 1, 4, 4)]
+    pf = PathFinder(make_navmesh([make_tile(polys)]))
+    want = math.hypot(2.5, 0.5) + math.hypot(0.5, 2.5)
+    assert pf.geodesic_distance([0.5, 0.0, 0.5], [3.5, 0.0, 3.5]) == pytest.approx(want, abs=1e-5)
+    pts = pf.find_path([0.5, 0.0, 0.5], [3.5, 0.0, 3.5])
+    assert len(pts) == 3 and np.allclose(pts[1], [3.0, 0.0, 1.0], atol=1e-5)
+    # several goals: the nearest by path, not by straight line
+    assert pf.geodesic_distance([0.5, 0.0, 0.5], [[3.5, 0.0, 3.5], [2.5, 0.0, 0.5]]) == pytest.approx(2.0, abs=1e-5)
+
+
+def test_paths_cross_tile_borders_and_islands_are_unreachable():
+    left = make_tile(grid_polys(0, 0, 2, 2, 1.0), tx=0, tile_size=2.0)
+    right = make_tile(grid_polys(2, 0, 4, 2, 1.0), tx=1, tile_size=2.0)
+    far = make_tile([rect(10, 0, 11, 1)], tx=5, tile_size=2.0)
+    pf = PathFinder(make_navmesh([left, right, far], tile_size=2.0))
+    assert pf.geodesic_distance([0.5, 0.0, 0.5], [3.5, 0.0, 1.5]) == pytest.approx(math.hypot(3.0, 1.0), abs=1e-5)
+    assert pf.geodesic_distance([0.5, 0.0, 0.5], [10.5, 0.0, 0.5]) == math.inf
+
+
+def test_navigability_follows_the_polygons():
+    pf = PathFinder(make_navmesh([make_tile([rect(0, 0, 2, 1), rect(2, 0, 3, 3)], bump=0.05)]))
+    assert pf.is_navigable([0.01, 0.0, 0.01]) and pf.is_navigable([2.99, 0.0, 2.99])  # a polygon's very corner
+    assert not pf.is_navigable([1.0, 0.0, 2.0])  # beside the L, inside its bounding box
+    assert not pf.is_navigable([1.0, 0.8, 0.5])  # over the floor but farther above it than 0.5 m
+    snapped = pf.snap_point([1.0, 0.0, 2.0])
+    assert snapped[2] == pytest.approx(1.0) and 0 <= snapped[1] <= 0.05
+    assert np.isnan(pf.snap_point([50.0, 0.0, 50.0])).all()  # outside the pick box of every polygon
+
+
+def test_a_scene_read_from_a_navmesh_answers_with_habitats_geodesic_by_default():
+    from ovon.sim.geodesic import geodesic_distance
+    from ovon.sim.navmesh import load_navmesh
+    from ovon.sim.navmesh.agreement import HABITAT_AGENT, geodesic_agreement
+
+    sn = load_navmesh(FIX / "van-gogh-room.navmesh", HABITAT_AGENT)
+    case = json.loads((FIX / "test-sim-geodesic-distance-test-golden.json").read_text())["single_end"][0]
+    assert geodesic_distance(sn, case["start"], case["end"]) == pytest.approx(case["expected"], rel=1e-5)
+    assert geodesic_distance(sn, case["start"], case["end"], how="field") != pytest.approx(case["expected"], rel=1e-5)
+    gold = json.loads((FIX / "test-sim-geodesic-distance-test-golden.json").read_text())
+    row = geodesic_agreement(sn, gold, "navmesh")
+    assert row["reachability_agrees"] == row["pairs"] == 20 and row["max_rel_error"] < 1e-5
+    assert {"median_rel_error", "p95_rel_error"} <= row.keys()
+    sn.source = "mesh"  # a scene built from triangles has no polygons to ask
+    with pytest.raises(ValueError, match="'navmesh' needs a scene read from a habitat navmesh"):
+        geodesic_distance(sn, case["start"], case["end"], how="navmesh")
