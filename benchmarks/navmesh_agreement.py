@@ -91,7 +91,7 @@ def run(navmesh_dir: Path, golden_dir: Path, cell_sizes: list[float]) -> dict:
                 cell["topdown"] = topdown_agreement(mesh, sn, np.load(golden_dir / gold["topdown_binary"]))
             if name == "van-gogh-room":  # habitat-lab's geodesic and trajectory goldens are on this scene
                 cell["geodesic"] = _geodesics(sn, geo)
-                cell["trajectory"] = trajectory_agreement(sn, traj)
+                cell["trajectory"] = {h: trajectory_agreement(sn, traj, how=h) for h in ("grid", "navmesh")}
             row["by_cell_size"][str(cs)] = cell
         scenes[name] = row
     return {"scenes": scenes, "navmeshes_not_found": missing}
@@ -128,11 +128,11 @@ def _print(res: dict) -> None:
                     f"{100 * g['max_rel_error']:.3f}% (mean abs {100 * g['mean_abs_error_m']:.2f} cm), reachability "
                     f"{g['reachability_agrees']}/{g['pairs']} ({g['habitat_unreachable']} unreachable in habitat)"
                 )
-            if "trajectory" in cell:
-                tr = cell["trajectory"]
+            for how, tr in cell.get("trajectory", {}).items():
                 print(
-                    f"    trajectory ({tr['steps']} steps, sliding): mean xz error "
-                    f"{100 * tr['mean_xz_error_m']:.2f} cm, max {100 * tr['max_xz_error_m']:.2f} cm"
+                    f"    trajectory on the {how} ({tr['steps']} steps, sliding): xz error mean "
+                    f"{100 * tr['mean_xz_error_m']:.4f} cm, median {100 * tr['median_xz_error_m']:.4f}, p95 "
+                    f"{100 * tr['p95_xz_error_m']:.4f}, max {100 * tr['max_xz_error_m']:.4f} cm"
                 )
     if res["navmeshes_not_found"]:
         print(f"not found (skipped): {', '.join(n + '.navmesh' for n in res['navmeshes_not_found'])}")

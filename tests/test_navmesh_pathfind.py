@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -81,6 +82,29 @@ def test_a_scene_read_from_a_navmesh_answers_with_habitats_geodesic_by_default()
     row = geodesic_agreement(sn, gold, "navmesh")
     assert row["reachability_agrees"] == row["pairs"] == 20 and row["max_rel_error"] < 1e-5
     assert {"median_rel_error", "p95_rel_error"} <= row.keys()
-    sn.source = "mesh"  # a scene built from triangles has no polygons to ask
+    built = dataclasses.replace(sn, source="mesh")  # a scene built from triangles has no polygons to ask
     with pytest.raises(ValueError, match="'navmesh' needs a scene read from a habitat navmesh"):
-        geodesic_distance(sn, case["start"], case["end"], how="navmesh")
+        geodesic_distance(built, case["start"], case["end"], how="navmesh")
+
+
+def test_steps_follow_the_polygons_as_habitats_do():
+    from ovon.sim.agent import MOVE_FORWARD, Kinematics
+    from ovon.sim.navmesh import load_navmesh
+    from ovon.sim.navmesh.agreement import HABITAT_AGENT, trajectory_agreement
+    from ovon.sim.types import AgentState
+
+    sn = load_navmesh(FIX / "van-gogh-room.navmesh", HABITAT_AGENT)
+    traj = json.loads((FIX / "habitat-sim_trajectory_data.json").read_text())
+    on_polys, on_grid = (trajectory_agreement(sn, traj, how=h) for h in ("navmesh", "grid"))
+    assert on_polys["steps"] == 57 and on_polys["max_xz_error_m"] < 1e-5  # habitat's, sliding included
+    assert on_grid["mean_xz_error_m"] > 100 * on_polys["mean_xz_error_m"]
+    # a move into the L's outer wall slides along it; a free move goes the whole way and does not collide
+    pf = PathFinder(make_navmesh([make_tile([rect(0, 0, 3, 1), rect(3, 0, 4, 1), rect(3, 1, 4, 4)])]))
+    end = pf.try_step([1.0, 0.0, 0.5], [1.2, 0.0, 1.5])
+    assert end == pytest.approx([1.2, 0.0, 1.0], abs=1e-6)
+    assert pf.try_step([3.5, 0.0, 0.5], [3.5, 0.0, 2.0]) == pytest.approx([3.5, 0.0, 2.0], abs=1e-6)
+    kin = Kinematics(sn.floors[0], HABITAT_AGENT.__class__(forward_step=0.25, allow_sliding=True), surface=pf)
+    step = kin.step(AgentState(np.array([3.5, 0.0, 0.1]), 0.0), MOVE_FORWARD)  # yaw 0: along -z, into the wall
+    assert step.collided and step.state.position == pytest.approx([3.5, 0.0, 0.0], abs=1e-6)
+    step = kin.step(AgentState(np.array([3.5, 0.0, 2.0]), 0.0), MOVE_FORWARD)
+    assert not step.collided and step.state.position == pytest.approx([3.5, 0.0, 1.75], abs=1e-6)

@@ -26,6 +26,7 @@ from ovon.config.sim import SimConfig
 from ovon.config.task import TaskConfig
 from ovon.scenes.model import Scene
 from ovon.sim.agent import ACTION_NAMES, STOP, Kinematics, Odometry
+from ovon.sim.navmesh.pathfind import navmesh_surface
 from ovon.sim.noise import ActuationNoise, OdometryNoise
 from ovon.sim.types import AgentState, Frame
 from ovon.sim.world import World, acquire_world
@@ -217,7 +218,7 @@ class ObjectNavEnv(gym.Env):
         self._state, self._grid, self._field = setup.state, setup.grid, setup.goal_field
         self._viewpoints, self._tracker = setup.viewpoints, setup.tracker
         self._point_goal = setup.point_goal
-        self._kin = Kinematics(self._grid, self.sim_cfg.agent, self._actuation)
+        self._kin = Kinematics(self._grid, self.sim_cfg.agent, self._actuation, surface=navmesh_surface(world.nav))
         self.spec_episode = spec
         self._frame = self._render()
         self._tracker.reset(self._state.position, self._frame.semantic, self._state.yaw)

@@ -8,6 +8,11 @@ the contact too); with sliding the agent ends at the navigable point nearest to 
 cells it can reach around the move (`ovon.sim.collision.slide_point`, Detour's moveAlongSurface on the
 grid: the target projected onto the wall it hits).
 Either way the step reports `collided=True`.
+
+On a scene read from a habitat navmesh, a sliding forward move follows the navmesh's polygons instead
+(`surface`: `PathFinder.try_step`, Detour's moveAlongSurface as habitat runs it; it reproduces habitat's
+golden 57-step trajectory to under a micrometre), and it collided when it moved less than asked
+(habitat-lab's rule: squared distances, 1e-5 slack).
 """
 
 from __future__ import annotations
@@ -36,10 +41,11 @@ class StepResult:
 class Kinematics:
     """Applies actions to the true state on one floor's `NavGrid`."""
 
-    def __init__(self, grid, cfg: AgentConfig, actuation: ActuationNoise | None = None):
+    def __init__(self, grid, cfg: AgentConfig, actuation: ActuationNoise | None = None, surface=None):  # noqa: ANN001
         self.grid = grid
         self.cfg = cfg
         self.actuation = actuation
+        self.surface = surface  # a navmesh PathFinder: sliding moves follow its polygons
         self._navigable = np.ascontiguousarray(grid.navigable, dtype=np.bool_)
 
     def step(self, state: AgentState, action: int, rng: np.random.Generator | None = None) -> StepResult:
@@ -96,6 +102,11 @@ class Kinematics:
         return np.array([start[0] + dx * f, start[1], start[2] + dz * f], dtype=np.float64), k == n
 
     def _move(self, start: np.ndarray, dx: float, dz: float) -> tuple[np.ndarray, bool]:
+        if self.surface is not None and self.cfg.allow_sliding:
+            target = np.array([start[0] + dx, start[1], start[2] + dz], dtype=np.float64)
+            out = self.surface.try_step(start, target)
+            asked, moved = float(((target - start) ** 2).sum()), float(((out - start) ** 2).sum())
+            return out, moved + 1e-5 < asked
         reached, free = self._free_prefix(start, dx, dz)
         if not free and self.cfg.allow_sliding:
             g = self.grid

@@ -67,16 +67,23 @@ def geodesic_agreement(sn: SceneNav, golden: dict, how: str = "field") -> dict[s
     }  # fmt: skip
 
 
-def trajectory_agreement(sn: SceneNav, trajectory: dict, agent: AgentConfig = HABITAT_AGENT) -> dict[str, Any]:
+def trajectory_agreement(
+    sn: SceneNav, trajectory: dict, agent: AgentConfig = HABITAT_AGENT, how: str = "grid"
+) -> dict[str, Any]:
     """Replay habitat-lab's recorded trajectory ({"positions", "rotations" [x, y, z, w], "actions"}) from its
-    first pose with ovon's kinematics; per step the xz distance to habitat's position after that action."""
+    first pose with ovon's kinematics, on the grid (`how="grid"`) or on the navmesh's polygons ("navmesh",
+    what a scene read from a navmesh does); per step the xz distance to habitat's position after that action."""
     from ovon.sim.agent import ACTION_NAMES, Kinematics
+    from ovon.sim.navmesh.pathfind import path_finder
     from ovon.sim.types import AgentState
 
     pos = np.asarray(trajectory["positions"], dtype=np.float64)
     q = trajectory["rotations"][0]
     state = AgentState(pos[0].copy(), 2.0 * math.atan2(float(q[1]), float(q[3])))
-    kin = Kinematics(sn.grid_for(pos[min(1, len(pos) - 1)]), agent)
+    if how not in ("grid", "navmesh"):
+        raise ValueError(f"unknown kinematics {how!r} (grid | navmesh)")
+    surface = path_finder(sn.source) if how == "navmesh" else None
+    kin = Kinematics(sn.grid_for(pos[min(1, len(pos) - 1)]), agent, surface=surface)
     errors = []
     collisions = 0
     for i, name in enumerate(trajectory["actions"][:-1]):  # the last action is STOP
@@ -86,7 +93,10 @@ def trajectory_agreement(sn: SceneNav, trajectory: dict, agent: AgentConfig = HA
         errors.append(float(np.hypot(*(state.position - pos[i + 1])[[0, 2]])))
     e = np.asarray(errors)
     return {
+        "how": how,
         "steps": len(e),
+        "median_xz_error_m": float(np.median(e)),
+        "p95_xz_error_m": float(np.quantile(e, 0.95)),
         "mean_xz_error_m": float(e.mean()),
         "max_xz_error_m": float(e.max()),
         "final_xz_error_m": float(e[-1]),

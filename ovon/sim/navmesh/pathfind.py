@@ -47,6 +47,7 @@ class PolyGraph:
     tris: np.ndarray  # (T, 3, 3)
     link_start: np.ndarray  # (P + 1,) links of polygon p: link_*[link_start[p]:link_start[p + 1]]
     link_src: np.ndarray  # (L,) source polygon
+    link_edge: np.ndarray  # (L,) the source polygon's edge the link crosses
     link_to: np.ndarray  # (L,) target polygon
     link_left: np.ndarray  # (L, 3) portal end points as Detour's getPortalPoints returns them
     link_right: np.ndarray  # (L, 3)
@@ -111,6 +112,7 @@ def poly_graph(mesh: NavMesh) -> PolyGraph:
         tris=tris,
         link_start=np.searchsorted(src, np.arange(n + 1)).astype(np.int64),
         link_src=src.astype(np.int64),
+        link_edge=edge.astype(np.int64),
         link_to=dst.astype(np.int64),
         link_left=left,
         link_right=right,
@@ -234,6 +236,17 @@ def _nearest(g_verts, g_nv, walk, bmin, bmax, tris, tri_start, climb, p, ext, ou
     z1 = min(int(math.floor((p[2] + ext[2] - org[1]) / BUCKET)), shape[1] - 1)
     if x1 < x0 or z1 < z0:
         return -1, False
+    # the first polygon (in id order) that p is over, within climb, has distance 0 and nothing beats it; such
+    # a polygon is listed in p's own bucket (ids sorted), so look there first
+    bx = int(math.floor((p[0] - org[0]) / BUCKET))
+    bz = int(math.floor((p[2] - org[1]) / BUCKET))
+    if 0 <= bx < shape[0] and 0 <= bz < shape[1]:
+        b = bx * shape[1] + bz
+        for k in range(start[b], start[b + 1]):
+            q = ids[k]
+            if _closest(g_verts, g_nv, tris, tri_start, q, p, tmp) and abs(p[1] - tmp[1]) <= climb:
+                out[:] = tmp
+                return q, True
     m = 0
     for bx in range(x0, x1 + 1):
         for bz in range(z0, z1 + 1):
@@ -411,6 +424,8 @@ def _chain(link_src, parent_link, end):  # noqa: ANN001, ANN202
 
 @njit(cache=True)
 def _query(
+    a,
+    goals,
     g_verts,
     g_nv,
     walk,
@@ -426,8 +441,6 @@ def _query(
     link_to,
     left,
     right,
-    a,
-    goals,
     parent_link,
     node_pos,
     cost,
@@ -468,6 +481,60 @@ def _query(
     return best
 
 
+@njit(cache=True)
+def _move_along(g_verts, g_nv, link_start, link_edge, link_to, tris, tri_start, start_poly, sp, ep):  # noqa: ANN001, ANN202
+    """Detour's moveAlongSurface, then the surface height (habitat's try_step): a breadth-first walk over
+    the polygons within reach of the segment sp -> ep; the end point if a visited polygon holds it, else
+    the nearest point (x/z) on a wall edge of the visited polygons, so a blocked move slides along the wall."""
+    n = len(g_nv)
+    seen = np.zeros(n, np.bool_)
+    queue = np.empty(n, np.int64)
+    head, tail = 0, 1
+    queue[0] = start_poly
+    seen[start_poly] = True
+    search = 0.5 * (sp + ep)
+    rad = 0.5 * math.sqrt((sp[0] - ep[0]) ** 2 + (sp[1] - ep[1]) ** 2 + (sp[2] - ep[2]) ** 2) + 0.001
+    best_pos = sp.copy()
+    best_d = np.inf
+    best_poly = start_poly
+    while head < tail:
+        cur = queue[head]
+        head += 1
+        nv = g_nv[cur]
+        verts = g_verts[cur]
+        if _inside(ep, verts, nv):
+            best_poly = cur
+            best_pos = ep.copy()
+            break
+        j = nv - 1
+        for i in range(nv):
+            wall = True
+            for li in range(link_start[cur], link_start[cur + 1]):
+                if link_edge[li] != j:
+                    continue
+                wall = False
+                nb = link_to[li]
+                if seen[nb]:
+                    continue
+                if _seg_t(search, verts[j], verts[i])[0] > rad * rad:
+                    continue
+                seen[nb] = True
+                queue[tail] = nb
+                tail += 1
+            if wall:
+                d, t = _seg_t(ep, verts[j], verts[i])
+                if d < best_d:
+                    best_d = d
+                    best_poly = cur
+                    for k in range(3):
+                        best_pos[k] = verts[j, k] + (verts[i, k] - verts[j, k]) * t
+            j = i
+    h = _height(best_pos, tris, tri_start[best_poly], tri_start[best_poly + 1])
+    if not np.isnan(h):
+        best_pos[1] = h
+    return best_pos
+
+
 # ----------------------------------------------------------------------------------------------
 # the finder
 # ----------------------------------------------------------------------------------------------
@@ -486,6 +553,12 @@ class PathFinder:
         self._state = np.empty(n, np.int64)
         self._ext = np.asarray(POLY_PICK_EXTENT, np.float64)
         self._buckets = _buckets(self.g.bmin, self.g.bmax, self.g.walkable)
+        g = self.g
+        self._query_args = (
+            g.verts, g.nv, g.walkable, g.island, g.bmin, g.bmax, g.tris, g.tri_start, g.climb, self._ext,
+            g.link_start, g.link_src, g.link_to, g.link_left, g.link_right,
+            self._parent, self._pos, self._cost, self._total, self._state, self._buckets,
+        )  # fmt: skip
 
     def nearest(self, xyz) -> tuple[int, np.ndarray, bool]:
         """(polygon or -1, the snapped point, whether the point is over that polygon)."""
@@ -507,6 +580,19 @@ class PathFinder:
         p = np.asarray(xyz, np.float64).reshape(3)
         poly, out, over = self.nearest(p)
         return poly >= 0 and over and abs(out[1] - p[1]) <= max_y_delta
+
+    def try_step(self, start, end) -> np.ndarray:
+        """Where a move from start toward end ends on the navmesh, sliding along walls (habitat's try_step):
+        the start itself when it is on no polygon."""
+        p = np.asarray(start, np.float64).reshape(3)
+        poly, snapped, _ = self.nearest(p)
+        if poly < 0:
+            return p.copy()
+        g = self.g
+        return _move_along(
+            g.verts, g.nv, g.link_start, g.link_edge, g.link_to, g.tris, g.tri_start, poly, snapped,
+            np.asarray(end, np.float64).reshape(3),
+        )  # fmt: skip
 
     def find_path(self, a, b) -> np.ndarray:
         """The straight path (K, 3) from a to b as habitat returns it; (0, 3) when there is none."""
@@ -530,15 +616,8 @@ class PathFinder:
         """Length of the shortest straight path from a to the nearest of `goals` ((3,) or (K, 3)); inf when none
         is reachable. Goals are tried nearest first and skipped once their straight-line distance alone is
         no shorter than the best path (habitat's MultiGoalShortestPath)."""
-        g = self.g
-        return float(
-            _query(
-                g.verts, g.nv, g.walkable, g.island, g.bmin, g.bmax, g.tris, g.tri_start, g.climb, self._ext,
-                g.link_start, g.link_src, g.link_to, g.link_left, g.link_right,
-                np.asarray(a, np.float64).reshape(3), np.asarray(goals, np.float64).reshape(-1, 3),
-                self._parent, self._pos, self._cost, self._total, self._state, self._buckets,
-            )
-        )  # fmt: skip
+        a = np.asarray(a, np.float64).reshape(3)
+        return float(_query(a, np.asarray(goals, np.float64).reshape(-1, 3), *self._query_args))
 
 
 _FINDERS = LRU(16)
@@ -553,3 +632,10 @@ def path_finder(path: str) -> PathFinder:
 
     key = (str(path), hashlib.sha256(data).hexdigest())
     return _FINDERS.get(key, lambda: PathFinder(parse_navmesh(data, str(path))))
+
+
+def navmesh_surface(nav) -> PathFinder | None:  # noqa: ANN001 - a SceneNav
+    """The PathFinder of a scene read from a habitat navmesh (its steps and geodesics follow the polygons),
+    None for a scene whose navigability was computed from its triangles."""
+    source = str(getattr(nav, "source", ""))
+    return path_finder(source) if source.endswith(".navmesh") else None
