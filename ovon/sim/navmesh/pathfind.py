@@ -301,7 +301,6 @@ def _astar(
         state[q] = 0  # 0 new, 1 open, 2 closed
     heap_k = np.empty(4 * n + 16)
     heap_v = np.empty(4 * n + 16, np.int64)
-    size = 0
     node_pos[start] = sp
     cost[start] = 0.0
     total[start] = _dist(sp, ep) * H_SCALE
@@ -624,14 +623,16 @@ _FINDERS = LRU(16)
 
 
 def path_finder(path: str) -> PathFinder:
-    """The PathFinder of a navmesh file, cached in-process by path and file content."""
+    """The PathFinder of a navmesh file, cached in-process by path, size and modification time: a query
+    per step stats the file, it does not read it again."""
+    from pathlib import Path
+
     from ovon.sim.navmesh.format import navmesh_file_bytes, parse_navmesh
 
-    data = navmesh_file_bytes(path)
-    import hashlib
-
-    key = (str(path), hashlib.sha256(data).hexdigest())
-    return _FINDERS.get(key, lambda: PathFinder(parse_navmesh(data, str(path))))
+    p = Path(path)
+    st = p.stat() if p.is_file() else None
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns) if st else (str(p), None, None)
+    return _FINDERS.get(key, lambda: PathFinder(parse_navmesh(navmesh_file_bytes(p), str(p))))
 
 
 def navmesh_surface(nav) -> PathFinder | None:  # noqa: ANN001 - a SceneNav
