@@ -85,39 +85,60 @@ def bench(path: Path, n: int, rng: np.random.Generator) -> dict:
     a0, b0 = pairs[0]
     pf.geodesic_distance(a0, b0)
     geodesic.distance_field(grid, b0[None]).path_length(a0)  # JIT warm-up
-    times: dict[str, list[float]] = {"navmesh": [], "field": [], "path": [], "field_cached": []}
+    times: dict[str, list[float]] = {
+        k: [] for k in ("navmesh", "field", "path", "field_cached", "navmesh_cold", "navmesh_step", "field_step")
+    }
     errs: dict[str, list[float]] = {"field": [], "path": []}
-    for a, b in pairs:
+    d_nav = []
+    for a, b in pairs:  # back to back, as dataset generation and validation ask
         t = time.perf_counter()
-        d_nav = pf.geodesic_distance(a, b)
+        d_nav.append(pf.geodesic_distance(a, b))
         times["navmesh"].append(time.perf_counter() - t)
+    # an episode's distance-to-goal per step: VIEWPOINTS goal points around one object, snapped once
+    ring = [b0 + np.array([math.cos(t), 0.0, math.sin(t)]) * r for t in np.linspace(0, 2 * math.pi, 20, endpoint=False)
+            for r in (0.5, 1.0)]  # fmt: skip
+    vps = np.array([p for p in ring if pf.is_navigable(p)] or [b0])
+    measure = pf.distance_to(vps)
+    field_vps = geodesic.distance_field(grid, vps)
+    for a, _ in pairs:
+        t = time.perf_counter()
+        measure(a)
+        times["navmesh_step"].append(time.perf_counter() - t)
+        t = time.perf_counter()
+        field_vps.distance(a)
+        times["field_step"].append(time.perf_counter() - t)
+    for (a, b), dn in zip(pairs, d_nav):
         geodesic.clear_cache()
         t = time.perf_counter()
-        f = geodesic.distance_field(grid, b[None])
-        d_field = f.distance(a)
+        d_field = geodesic.distance_field(grid, b[None]).distance(a)
         times["field"].append(time.perf_counter() - t)
         t = time.perf_counter()
         d_field2 = geodesic.distance_field(grid, b[None]).distance(a)
         times["field_cached"].append(time.perf_counter() - t)
+        assert d_field2 == d_field
+        t = time.perf_counter()  # right after a field was built: the polygon arrays are out of the caches
+        pf.geodesic_distance(a, b)
+        times["navmesh_cold"].append(time.perf_counter() - t)
         geodesic.clear_cache()
         t = time.perf_counter()
         d_path = geodesic.distance_field(grid, b[None]).path_length(a)
         times["path"].append(time.perf_counter() - t)
-        assert d_field2 == d_field
         for k, d in (("field", d_field), ("path", d_path)):
-            if math.isfinite(d) and d_nav > 0.5:
-                errs[k].append(abs(d - d_nav) / d_nav)
+            if math.isfinite(d) and dn > 0.5:
+                errs[k].append(abs(d - dn) / dn)
     row: dict = {
         "navmesh": path.name,
         "polygons": pf.g.count,
         "pairs": len(pairs),
         "grid": list(grid.navigable.shape),
         "pathfinder_build_s": build_s,
+        "step_viewpoints": len(vps),
     }
     for k, v in times.items():
         row[f"{k}_ms"] = float(np.median(v)) * 1e3
     for k in ("field", "path", "field_cached"):
         row[f"{k}_over_navmesh"] = row[f"{k}_ms"] / row["navmesh_ms"]
+    row["field_over_navmesh_cold"] = row["field_ms"] / row["navmesh_cold_ms"]
     for k, e in errs.items():
         a = np.asarray(e)
         row[f"{k}_vs_navmesh_rel_err"] = (
@@ -150,8 +171,9 @@ def main() -> int:
         for s in (x for x in args.houses.split(",") if x.strip()):
             paths.append(house_navmesh(int(s), Path(tmp)))
         rows = [bench(p, args.pairs, rng) for p in paths]
-    cols = ["navmesh", "polygons", "pairs", "navmesh_ms", "field_ms", "path_ms", "field_cached_ms",
-            "field_over_navmesh", "path_over_navmesh"]  # fmt: skip
+    cols = ["navmesh", "polygons", "pairs", "navmesh_ms", "navmesh_cold_ms", "field_ms", "path_ms",
+            "field_cached_ms", "field_over_navmesh", "field_over_navmesh_cold", "path_over_navmesh",
+            "step_viewpoints", "navmesh_step_ms", "field_step_ms"]  # fmt: skip
     print(" | ".join(cols))
     for r in rows:
         print(" | ".join(f"{r[c]:.4g}" if isinstance(r[c], float) else str(r[c]) for c in cols))

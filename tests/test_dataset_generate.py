@@ -199,7 +199,7 @@ def test_shortest_path_oracle_finishes_every_generated_episode(tiny_dataset, tin
                     ep.start_position,
                     quat_to_yaw(ep.start_rotation),
                     vps,
-                    fld,
+                    fld.distance,
                     task.max_steps,
                     task.success_distance,
                 )

@@ -302,6 +302,7 @@ def test_episode_and_expert_on_a_navmesh_scene(tmp_path):
     from ovon.experts import ShortestPathExpert
     from ovon.experts.gridsim import rollout
     from ovon.sim.agent import MOVE_FORWARD, STOP
+    from ovon.sim.navmesh.pathfind import path_finder
     from ovon.sim.world import build_world
     from ovon.task.episode import EpisodeSpec
     from ovon.task.setup import prepare_episode
@@ -318,6 +319,12 @@ def test_episode_and_expert_on_a_navmesh_scene(tmp_path):
             setup = prepare_episode(world, EpisodeSpec("nm", scene.scene_id, "couch"), np.random.default_rng(seed),
                                     TaskConfig(), 60.0)  # fmt: skip
             assert world.nav.is_navigable(setup.state.position)
+            # the episode's distance-to-goal is habitat's DistanceToGoal: the polygons' multi-goal geodesic
+            pts = np.stack([v.position for v in setup.viewpoints])
+            setup.tracker.reset(setup.state.position)
+            d0 = path_finder(world.nav.source).geodesic_distance(setup.state.position, pts)
+            assert setup.tracker.d0 == d0 and math.isfinite(d0)
+            assert setup.tracker.d0 != setup.goal_field.distance(setup.state.position)  # the grid's field differs
             goals = [(v.position, 0.0) for v in setup.viewpoints]
             states, actions, _ = rollout(ShortestPathExpert(), setup.grid, setup.state, goals, 300)
             assert actions[-1] == STOP

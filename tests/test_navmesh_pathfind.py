@@ -108,3 +108,24 @@ def test_steps_follow_the_polygons_as_habitats_do():
     assert step.collided and step.state.position == pytest.approx([3.5, 0.0, 0.0], abs=1e-6)
     step = kin.step(AgentState(np.array([3.5, 0.0, 2.0]), 0.0), MOVE_FORWARD)
     assert not step.collided and step.state.position == pytest.approx([3.5, 0.0, 1.75], abs=1e-6)
+
+
+def test_the_distance_to_goals_is_habitats_on_a_navmesh_scene_and_the_fields_elsewhere():
+    from ovon.sim.geodesic import distance_field, distance_to_goals
+    from ovon.sim.navmesh import load_navmesh
+    from ovon.sim.navmesh.agreement import HABITAT_AGENT
+
+    sn = load_navmesh(FIX / "van-gogh-room.navmesh", HABITAT_AGENT)
+    gold = json.loads((FIX / "test-sim-geodesic-distance-test-golden.json").read_text())["single_end"]
+    ends = np.array([c["end"] for c in gold[:6]])
+    pf = PathFinder(read_navmesh(FIX / "van-gogh-room.navmesh"))
+    field = distance_field(sn.grid_for(ends[0]), ends)
+    measure = distance_to_goals(sn, field, ends)
+    for c in gold:  # goals snapped once answer as the one-shot multi-goal query does, every start
+        assert measure(c["start"]) == pf.geodesic_distance(c["start"], ends)
+    reachable = [c for c in gold if math.isfinite(measure(c["start"]))]
+    assert reachable and any(measure(c["start"]) != field.distance(c["start"]) for c in reachable)
+    built = dataclasses.replace(sn, source="mesh")
+    assert distance_to_goals(built, field, ends) == field.distance  # a scene from triangles: the grid's field
+    far = pf.distance_to(np.array([[100.0, 0.0, 100.0]]))  # a goal outside every pick box reaches nothing
+    assert far(gold[0]["start"]) == math.inf

@@ -210,7 +210,7 @@ def _nav_cache(out: Path) -> Path:
 def episodes_job(job: dict) -> dict:
     """Sample the allocated episodes of one (scene, split) and write its shard."""
     from ovon.dataset.starts import sample_start
-    from ovon.sim.geodesic import distance_field
+    from ovon.sim.geodesic import distance_field, distance_to_goals
     from ovon.sim.navgrid import build_navigation
     from ovon.sim.world import load_scene_any
 
@@ -240,31 +240,33 @@ def episodes_job(job: dict) -> dict:
         vps = np.array([vp["position"] for vp in on_floor], dtype=np.float64)
         grid = nav.floors[main_floor]
         fld = distance_field(grid, vps)
+        dist = distance_to_goals(nav, fld, vps)
         oracle_vps = [(np.asarray(vp["position"], dtype=np.float64), quat_to_yaw(vp["rotation"])) for vp in on_floor]
         per_cat[cat] = (
             cats,
             grid,
             fld,
             vps,
-            _oracle_accept(grid, fld, oracle_vps, cfg) if cfg.starts.oracle_check else None,
+            _oracle_accept(grid, dist, oracle_vps, cfg) if cfg.starts.oracle_check else None,
+            dist,
         )
     dropped = set()
     strata: dict[str, list[int]] = job.get("strata") or {}
     n_bins = max(0, len(cfg.starts.val_strata_m) - 1)
     while queue:
         for cat in list(queue):
-            cats, grid, fld, vps, accept = per_cat[cat]
+            cats, grid, fld, vps, accept, dist = per_cat[cat]
             if strata.get(cat):
                 start = None
                 target = strata[cat][alloc[cat] - queue[cat]]
                 for j, bounds in stratum_bounds(cfg.starts, target, n_bins):
-                    start = sample_start(grid, fld, vps, bounds, rng, reasons, accept)
+                    start = sample_start(grid, fld, vps, bounds, rng, reasons, accept, dist)
                     if start is not None:
                         if j != target:
                             reasons["stratum_moved"] += 1
                         break
             else:
-                start = sample_start(grid, fld, vps, cfg.starts, rng, reasons, accept)
+                start = sample_start(grid, fld, vps, cfg.starts, rng, reasons, accept, dist)
             if start is None:
                 reasons["category_without_start"] += 1
                 dropped.add(cat)
@@ -314,7 +316,7 @@ def episodes_job(job: dict) -> dict:
     }
 
 
-def _oracle_accept(grid, fld, oracle_vps: list, cfg: GenerationConfig):  # noqa: ANN001, ANN202
+def _oracle_accept(grid, dist, oracle_vps: list, cfg: GenerationConfig):  # noqa: ANN001, ANN202
     """The start check of `StartConfig.oracle_check`: the shortest-path oracle, run from the start as the
     episode file will hold it (rounded position and rotation), must finish."""
     from ovon.config.task import TaskConfig
@@ -330,7 +332,7 @@ def _oracle_accept(grid, fld, oracle_vps: list, cfg: GenerationConfig):  # noqa:
             pos,
             quat_to_yaw(_r(yaw_to_quat(yaw), nd)),
             oracle_vps,
-            fld,
+            dist,
             task.max_steps,
             task.success_distance,
             AgentConfig(),

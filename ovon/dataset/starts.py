@@ -39,13 +39,17 @@ def sample_start(
     rng: np.random.Generator,
     reasons: Counter,
     accept: Callable[[np.ndarray, float], bool] | None = None,
+    distance: Callable[[np.ndarray], float] | None = None,
 ) -> Start | None:
     """One start for a goal set (all viewpoints of the category and its children on this floor).
 
-    `accept(position, yaw)`, when given, is the last check (the generator passes the oracle rollout)."""
+    `accept(position, yaw)`, when given, is the last check (the generator passes the oracle rollout).
+    `distance` is the scene's distance-to-goal (`ovon.sim.geodesic.distance_to_goals`; default the field's):
+    the number the episode records and is scored by; the field still gives the path for the floor check."""
+    distance = distance or field.distance
     for _ in range(cfg.max_tries):
         p = grid.random_point(rng, cfg.min_island_radius)
-        d = field.distance(p)
+        d = distance(p)
         if not math.isfinite(d):
             reasons["unreachable"] += 1
             continue
@@ -81,13 +85,14 @@ def oracle_finishes(
     position,
     yaw: float,
     viewpoints: list[tuple[np.ndarray, float]],
-    field,
+    distance: Callable[[np.ndarray], float],
     max_steps: int,
     success_distance: float,
     agent=None,
 ) -> bool:  # noqa: ANN001
     """Whether the shortest-path oracle (`ovon evaluate --agent shortest-path`, noise-free) finishes an
-    episode from this start: the same expert and kinematics on the same grid, without rendering.
+    episode from this start: the same expert and kinematics on the same grid, without rendering; success is
+    judged by `distance` (the scene's distance-to-goal, as the episode will be scored).
 
     Why: a distance field can pass where the discrete agent cannot (a corner it clips, a corridor at an
     angle it cannot hold); a generated episode the oracle fails would count against every agent."""
@@ -97,4 +102,4 @@ def oracle_finishes(
 
     state = AgentState(np.asarray(position, dtype=np.float64).copy(), float(yaw), 0.0)
     states, actions, _ = rollout(ShortestPathExpert(), grid, state, viewpoints, max_steps=max_steps, agent=agent)
-    return bool(actions) and actions[-1] == 0 and field.distance(states[-1].position) < success_distance
+    return bool(actions) and actions[-1] == 0 and distance(states[-1].position) < success_distance

@@ -224,7 +224,7 @@ class ValidationReport:
 
 
 def _check_geometry(ep, goals, nav, cfg: GenerationConfig, where: str, rep: ValidationReport, tol: float) -> None:
-    from ovon.sim.geodesic import distance_field
+    from ovon.sim.geodesic import distance_field, distance_to_goals
 
     why = start_problem(nav, ep.start_position)
     if why:
@@ -238,7 +238,7 @@ def _check_geometry(ep, goals, nav, cfg: GenerationConfig, where: str, rep: Vali
         rep.error("other_floor", f"{where}: no goal viewpoint on the start's floor {grid.floor}")
         return
     fld = distance_field(grid, vps[same_floor])
-    d = fld.distance(start)
+    d = distance_to_goals(nav, fld, vps[same_floor])(start)  # on a navmesh scene, habitat's own geodesic
     sc = cfg.starts
     if not math.isfinite(d):
         rep.error("unreachable", f"{where}: no goal viewpoint reachable from the start")

@@ -14,6 +14,7 @@ Euclidean distances in a small window around each goal, so distances are not bia
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -414,12 +415,12 @@ def geodesic_distance(nav: SceneNav, a, b, how: str = "auto") -> float:
     """Geodesic distance from a to b ((3,) or (K, 3) goals: the nearest); inf when unreachable. `how`:
     "navmesh" (habitat's own answer on the navmesh the scene was read from: polygon A* and funnel,
     `ovon.sim.navmesh.pathfind`; exact on habitat's golden geodesics), "field" (the distance field, what
-    episodes and metrics use), "path" (3D length of the string-pulled grid path); "auto": "navmesh" when
-    the scene came from a navmesh file, else "field"."""
+    episodes and metrics use on a scene built from triangles: `distance_to_goals`), "path" (3D length of
+    the string-pulled grid path); "auto": "navmesh" when the scene came from a navmesh file, else "field"."""
     if how not in GEODESIC_MEASURES:
         raise ValueError(f"unknown geodesic measure {how!r} ({' | '.join(GEODESIC_MEASURES)})")
     goals = np.asarray(b, dtype=np.float64).reshape(-1, 3)
-    from_navmesh = nav.source.endswith(".navmesh")
+    from_navmesh = nav.from_navmesh
     if how == "navmesh" and not from_navmesh:
         raise ValueError(
             f"geodesic measure 'navmesh' needs a scene read from a habitat navmesh, got one built from {nav.source!r}; "
@@ -437,6 +438,18 @@ def geodesic_distance(nav: SceneNav, a, b, how: str = "auto") -> float:
         return math.inf
     f = distance_field(nav.floors[fa], goals[same])
     return f.distance(a) if how in ("field", "auto") else f.path_length(a)
+
+
+def distance_to_goals(nav: SceneNav, field: DistanceField, goals: np.ndarray) -> Callable[[np.ndarray], float]:
+    """The distance-to-goal measure of a scene (what d0, SPL, soft SPL, success, generated starts and
+    validation read): on a scene read from a habitat navmesh, habitat's own (the polygons' multi-goal
+    geodesic to `goals`, goals snapped once); elsewhere `field.distance`, the grid's field to the same
+    goals. One rule, so an episode is generated, validated and scored by the same number."""
+    if not nav.from_navmesh:
+        return field.distance
+    from ovon.sim.navmesh.pathfind import path_finder
+
+    return path_finder(nav.source).distance_to(goals)
 
 
 def clear_cache() -> None:

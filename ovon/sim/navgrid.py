@@ -330,6 +330,11 @@ class SceneNav:
     source: str = "mesh"  # "mesh" (computed from the triangles) or the path of the navmesh it was read from
 
     @property
+    def from_navmesh(self) -> bool:
+        """Read from a habitat navmesh: its polygons answer geodesics, steps and distance-to-goal."""
+        return self.source.endswith(".navmesh")
+
+    @property
     def floor_heights(self) -> list[float]:
         return [g.height for g in self.floors]
 

@@ -17,7 +17,7 @@ import numpy as np
 from ovon.config.task import TaskConfig
 from ovon.lru import LRU
 from ovon.scenes.model import footprint_distance
-from ovon.sim.geodesic import CACHE_SIZE, DistanceField, distance_field
+from ovon.sim.geodesic import CACHE_SIZE, DistanceField, distance_field, distance_to_goals
 from ovon.sim.navgrid import START_HEIGHT_TOLERANCE_M
 from ovon.sim.types import AgentState
 from ovon.sim.world import World
@@ -82,9 +82,10 @@ def prepare_episode(
     else:
         grid, points, viewpoints = _adhoc_viewpoints(world, grids, objs, spec.goal_category)
     field = distance_field(grid, points)
+    distance_fn = distance_to_goals(world.nav, field, points)
     if start_pos is None:
-        start_pos = _random_reachable_start(grid, field, rng, task.success_distance)
-    elif not math.isfinite(field.distance(start_pos)):  # else the episode would run to its step limit first
+        start_pos = _random_reachable_start(grid, distance_fn, rng, task.success_distance)
+    elif not math.isfinite(distance_fn(start_pos)):  # else the episode would run to its step limit first
         raise ValueError(
             f"episode {spec.episode_id!r} in scene {spec.scene!r}: no goal viewpoint is reachable from "
             f"the start {np.round(start_pos, 3).tolist()} on floor {grid.floor}; fix: `ovon dataset "
@@ -99,7 +100,7 @@ def prepare_episode(
 
         coverage = Coverage(grid, task.reward.coverage_fov_deg or fov_deg, task.reward.coverage_range_m)
     tracker = EpisodeTracker(
-        distance_fn=field.distance,
+        distance_fn=distance_fn,
         goal_ids=goal_ids,
         cfg=task,
         distractors=_world_distractors(world, spec.goal_categories),
@@ -183,10 +184,10 @@ def object_floor_distance(objects: list, position: np.ndarray) -> float:
     return min(float(footprint_distance(o, xz)[0]) for o in objects)
 
 
-def _random_reachable_start(grid, field: DistanceField, rng: np.random.Generator, min_distance: float) -> np.ndarray:
+def _random_reachable_start(grid, distance_fn, rng: np.random.Generator, min_distance: float) -> np.ndarray:  # noqa: ANN001
     for _ in range(1000):
         p = grid.random_point(rng)
-        d = field.distance(p)
+        d = distance_fn(p)
         if math.isfinite(d) and d > min_distance:
             return p
     raise ValueError("could not find a navigable start connected to the goal in 1000 tries")
@@ -211,7 +212,8 @@ def _prepare_point(world: World, spec: EpisodeSpec, rng: np.random.Generator, ta
     else:
         grid, start, goal, field = sample_point_goal(world.nav.floors, rng, task)
     yaw = spec.start_yaw if spec.start_yaw is not None else float(rng.uniform(-math.pi, math.pi))
-    tracker = EpisodeTracker(distance_fn=field.distance, goal_ids=frozenset(), cfg=task, goal_known=True)
+    distance_fn = distance_to_goals(world.nav, field, np.asarray(goal, dtype=np.float64)[None])
+    tracker = EpisodeTracker(distance_fn=distance_fn, goal_ids=frozenset(), cfg=task, goal_known=True)
     state = AgentState(np.array(start, dtype=np.float64), float(yaw), 0.0)
     return EpisodeSetup(
         state,

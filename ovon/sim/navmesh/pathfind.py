@@ -294,13 +294,28 @@ def _dist(a, b):  # noqa: ANN001, ANN202
 
 @njit(cache=True)
 def _astar(
-    link_start, link_src, link_to, left, right, n, start, end, sp, ep, parent_link, node_pos, cost, total, state
-):  # noqa: ANN001, ANN202
-    """Detour's findPath over polygons; fills parent_link; returns whether `end` was reached."""
+    link_start,
+    link_src,
+    link_to,
+    left,
+    right,
+    n,
+    start,
+    end,
+    sp,
+    ep,
+    parent_link,
+    node_pos,
+    cost,
+    total,
+    state,
+    heap_k,
+    heap_v,
+):  # noqa: ANN001, ANN202 - fmt: skip
+    """Detour's findPath over polygons; fills parent_link; returns whether `end` was reached. `heap_k` /
+    `heap_v` are scratch (the PathFinder's, so a query allocates nothing; a copy grows if they fill)."""
     for q in range(n):
         state[q] = 0  # 0 new, 1 open, 2 closed
-    heap_k = np.empty(4 * n + 16)
-    heap_v = np.empty(4 * n + 16, np.int64)
     node_pos[start] = sp
     cost[start] = 0.0
     total[start] = _dist(sp, ep) * H_SCALE
@@ -422,6 +437,77 @@ def _chain(link_src, parent_link, end):  # noqa: ANN001, ANN202
 
 
 @njit(cache=True)
+def _snap_goals(goals, g_verts, g_nv, walk, bmin, bmax, tris, tri_start, climb, ext, buckets):  # noqa: ANN001, ANN202
+    """Each goal's nearest polygon (-1: none in the pick box) and snapped point, as findNearestPoly gives."""
+    k = len(goals)
+    snapped = np.empty((k, 3))
+    polys = np.empty(k, np.int64)
+    for j in range(k):
+        polys[j], _ = _nearest(
+            g_verts, g_nv, walk, bmin, bmax, tris, tri_start, climb, goals[j], ext, snapped[j], buckets
+        )
+    return polys, snapped
+
+
+@njit(cache=True)
+def _multi(
+    a,
+    polys,
+    snapped,
+    g_verts,
+    g_nv,
+    walk,
+    island,
+    bmin,
+    bmax,
+    tris,
+    tri_start,
+    climb,
+    ext,
+    link_start,
+    link_src,
+    link_to,
+    left,
+    right,
+    parent_link,
+    node_pos,
+    cost,
+    total,
+    state,
+    buckets,
+    heap_k,
+    heap_v,
+):  # noqa: ANN001, ANN202 - fmt: skip
+    """habitat's MultiGoalShortestPath to goals already snapped (`_snap_goals`): snap the start, try goals
+    nearest first, skip a goal once its straight-line distance alone is no shorter than the best path;
+    inf when none is reachable."""
+    sa = np.empty(3)
+    pa, _ = _nearest(g_verts, g_nv, walk, bmin, bmax, tris, tri_start, climb, a, ext, sa, buckets)
+    best = np.inf
+    if pa < 0:
+        return best
+    k = len(polys)
+    gap = np.empty(k)
+    for j in range(k):
+        gap[j] = _dist(snapped[j], sa) if polys[j] >= 0 else np.inf
+    n = len(g_nv)
+    for j in np.argsort(gap, kind="mergesort"):
+        pb = polys[j]
+        if pb < 0 or gap[j] >= best or island[pb] != island[pa]:
+            continue
+        sb = snapped[j]
+        if not _astar(link_start, link_src, link_to, left, right, n, pa, pb, sa, sb, parent_link, node_pos, cost,
+                      total, state, heap_k, heap_v):  # fmt: skip
+            continue
+        pts = _straight(_chain(link_src, parent_link, pb), left, right, sa, sb)
+        length = 0.0
+        for i in range(len(pts) - 1):
+            length += _dist(pts[i], pts[i + 1])
+        best = min(best, length)
+    return best
+
+
+@njit(cache=True)
 def _query(
     a,
     goals,
@@ -446,38 +532,15 @@ def _query(
     total,
     state,
     buckets,
+    heap_k,
+    heap_v,
 ):  # noqa: ANN001, ANN202 - fmt: skip
-    """habitat's MultiGoalShortestPath: snap the start and each goal, goals nearest first, a goal skipped
-    once its straight-line distance alone is no shorter than the best path; inf when none is reachable."""
-    sa = np.empty(3)
-    pa, _ = _nearest(g_verts, g_nv, walk, bmin, bmax, tris, tri_start, climb, a, ext, sa, buckets)
-    best = np.inf
-    if pa < 0:
-        return best
-    k = len(goals)
-    snapped = np.empty((k, 3))
-    polys = np.empty(k, np.int64)
-    gap = np.empty(k)
-    for j in range(k):
-        polys[j], _ = _nearest(
-            g_verts, g_nv, walk, bmin, bmax, tris, tri_start, climb, goals[j], ext, snapped[j], buckets
-        )
-        gap[j] = _dist(snapped[j], sa) if polys[j] >= 0 else np.inf
-    n = len(g_nv)
-    for j in np.argsort(gap, kind="mergesort"):
-        pb = polys[j]
-        if pb < 0 or gap[j] >= best or island[pb] != island[pa]:
-            continue
-        sb = snapped[j]
-        if not _astar(link_start, link_src, link_to, left, right, n, pa, pb, sa, sb, parent_link, node_pos, cost,
-                      total, state):  # fmt: skip
-            continue
-        pts = _straight(_chain(link_src, parent_link, pb), left, right, sa, sb)
-        length = 0.0
-        for i in range(len(pts) - 1):
-            length += _dist(pts[i], pts[i + 1])
-        best = min(best, length)
-    return best
+    """A one-off multi-goal query: `_snap_goals` and `_multi` in one call (one dispatch from Python)."""
+    polys, snapped = _snap_goals(goals, g_verts, g_nv, walk, bmin, bmax, tris, tri_start, climb, ext, buckets)
+    return _multi(
+        a, polys, snapped, g_verts, g_nv, walk, island, bmin, bmax, tris, tri_start, climb, ext,
+        link_start, link_src, link_to, left, right, parent_link, node_pos, cost, total, state, buckets, heap_k, heap_v,
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -552,11 +615,16 @@ class PathFinder:
         self._state = np.empty(n, np.int64)
         self._ext = np.asarray(POLY_PICK_EXTENT, np.float64)
         self._buckets = _buckets(self.g.bmin, self.g.bmax, self.g.walkable)
+        self._heap_k = np.empty(len(self.g.link_src) + n + 16)
+        self._heap_v = np.empty(len(self.g.link_src) + n + 16, np.int64)
         g = self.g
-        self._query_args = (
+        self._snap_args = (
+            g.verts, g.nv, g.walkable, g.bmin, g.bmax, g.tris, g.tri_start, g.climb, self._ext, self._buckets,
+        )  # fmt: skip
+        self._multi_args = (
             g.verts, g.nv, g.walkable, g.island, g.bmin, g.bmax, g.tris, g.tri_start, g.climb, self._ext,
             g.link_start, g.link_src, g.link_to, g.link_left, g.link_right,
-            self._parent, self._pos, self._cost, self._total, self._state, self._buckets,
+            self._parent, self._pos, self._cost, self._total, self._state, self._buckets, self._heap_k, self._heap_v,
         )  # fmt: skip
 
     def nearest(self, xyz) -> tuple[int, np.ndarray, bool]:
@@ -605,7 +673,7 @@ class PathFinder:
             return np.zeros((0, 3))
         ok = _astar(
             g.link_start, g.link_src, g.link_to, g.link_left, g.link_right, g.count, pa, pb, sa, sb,
-            self._parent, self._pos, self._cost, self._total, self._state,
+            self._parent, self._pos, self._cost, self._total, self._state, self._heap_k, self._heap_v,
         )  # fmt: skip
         if not ok:
             return np.zeros((0, 3))
@@ -616,7 +684,26 @@ class PathFinder:
         is reachable. Goals are tried nearest first and skipped once their straight-line distance alone is
         no shorter than the best path (habitat's MultiGoalShortestPath)."""
         a = np.asarray(a, np.float64).reshape(3)
-        return float(_query(a, np.asarray(goals, np.float64).reshape(-1, 3), *self._query_args))
+        return float(_query(a, np.asarray(goals, np.float64).reshape(-1, 3), *self._multi_args))
+
+    def distance_to(self, goals) -> GoalDistance:
+        """The geodesic distance to the nearest of `goals` as a function of the start, with the goals
+        snapped once (habitat's MultiGoalShortestPath caches its requested ends the same way): a metric
+        that asks every step pays for the start's snap and the A*s only."""
+        g = np.ascontiguousarray(np.asarray(goals, np.float64).reshape(-1, 3))
+        polys, snapped = _snap_goals(g, *self._snap_args)
+        return GoalDistance(self, polys, snapped)
+
+
+class GoalDistance:
+    """Geodesic distance (m) from a point to the nearest of a fixed goal set on one navmesh: callable."""
+
+    def __init__(self, finder: PathFinder, polys: np.ndarray, snapped: np.ndarray) -> None:
+        self.finder, self.polys, self.snapped = finder, polys, snapped
+
+    def __call__(self, xyz) -> float:
+        a = np.asarray(xyz, np.float64).reshape(3)
+        return float(_multi(a, self.polys, self.snapped, *self.finder._multi_args))
 
 
 _FINDERS = LRU(16)
@@ -638,5 +725,4 @@ def path_finder(path: str) -> PathFinder:
 def navmesh_surface(nav) -> PathFinder | None:  # noqa: ANN001 - a SceneNav
     """The PathFinder of a scene read from a habitat navmesh (its steps and geodesics follow the polygons),
     None for a scene whose navigability was computed from its triangles."""
-    source = str(getattr(nav, "source", ""))
-    return path_finder(source) if source.endswith(".navmesh") else None
+    return path_finder(nav.source) if nav.from_navmesh else None
