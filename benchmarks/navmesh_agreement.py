@@ -42,6 +42,7 @@ from ovon.sim.navmesh.agreement import (  # noqa: E402
     HABITAT_AGENT,
     geodesic_agreement,
     island_agreement,
+    navigability_agreement,
     topdown_agreement,
     trajectory_agreement,
 )
@@ -89,6 +90,7 @@ def run(navmesh_dir: Path, golden_dir: Path, cell_sizes: list[float]) -> dict:
             }
             if gold.get("topdown_binary") and (golden_dir / gold["topdown_binary"]).is_file():
                 cell["topdown"] = topdown_agreement(mesh, sn, np.load(golden_dir / gold["topdown_binary"]))
+            cell["navigability"] = navigability_agreement(sn)
             if name == "van-gogh-room":  # habitat-lab's geodesic and trajectory goldens are on this scene
                 cell["geodesic"] = _geodesics(sn, geo)
                 cell["trajectory"] = {h: trajectory_agreement(sn, traj, how=h) for h in ("grid", "navmesh")}
@@ -121,6 +123,12 @@ def _print(res: dict) -> None:
                     f"{100 * td['grid_agrees']:.2f}% (IoU {td['grid_iou']:.3f})"
                 )
             print(line)
+            nv = cell["navigability"]
+            print(
+                f"    of {nv['points']} points habitat calls navigable: the grid blocks "
+                f"{100 * nv['grid_blocked']:.2f}%, the scene refuses {100 * nv['scene_refuses']:.2f}% "
+                f"(as a start {100 * nv['start_refused']:.2f}%)"
+            )
             for label, g in cell.get("geodesic", {}).items():
                 print(
                     f"    geodesic {label}: rel err mean {100 * g['mean_rel_error']:.3f}%, median "

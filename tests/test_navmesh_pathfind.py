@@ -129,3 +129,77 @@ def test_the_distance_to_goals_is_habitats_on_a_navmesh_scene_and_the_fields_els
     assert distance_to_goals(built, field, ends) == field.distance  # a scene from triangles: the grid's field
     far = pf.distance_to(np.array([[100.0, 0.0, 100.0]]))  # a goal outside every pick box reaches nothing
     assert far(gold[0]["start"]) == math.inf
+
+
+def test_a_point_habitat_calls_navigable_is_navigable_and_a_valid_start_on_a_navmesh_scene():
+    """The grid is a cache of the polygons: where its rasterisation left a cell blocked under a walkable
+    polygon (next to the polygon's border), the scene still calls the point navigable and lets an episode
+    start there, as habitat does."""
+    from ovon.sim.navmesh import load_navmesh
+    from ovon.sim.navmesh.agreement import HABITAT_AGENT
+
+    sn = load_navmesh(FIX / "van-gogh-room.navmesh", HABITAT_AGENT)
+    pf = PathFinder(read_navmesh(FIX / "van-gogh-room.navmesh"))
+    rng = np.random.default_rng(0)
+    lo, hi = pf.g.bmin.min(axis=0), pf.g.bmax.max(axis=0)
+    on_polys = [p for p in (pf.snap_point(rng.uniform(lo, hi)) for _ in range(4000)) if np.isfinite(p).all()]
+    blocked = [p for p in on_polys if pf.is_navigable(p) and not sn.grid_for(p).is_navigable(p)]
+    assert blocked, "expected some polygon points in cells the grid leaves blocked"
+    for p in blocked[:20]:
+        assert sn.is_navigable(p) and sn.start_problem(p) is None
+    p = blocked[0]
+    assert "m from its floor's surface" in sn.start_problem(p + np.array([0.0, 0.6, 0.0]))
+    off = np.array([hi[0] + 3.0, lo[1], hi[2] + 3.0])  # beyond the 2 m pick box
+    assert not sn.is_navigable(off)
+    assert np.isnan(sn.snap(off)).all()  # habitat's snap_point: nothing within the pick box
+    q = p + np.array([0.0, 0.3, 0.0])
+    assert sn.snap(q) == pytest.approx(pf.snap_point(q)) and sn.is_navigable(sn.snap(q))
+    assert "not on a walkable polygon of the navmesh" in sn.start_problem(off)
+    built = dataclasses.replace(sn, source="mesh")  # a scene from triangles asks its grid
+    assert not built.is_navigable(p) and "not on the navigable map" in built.start_problem(p)
+    from ovon.sim.navmesh.agreement import navigability_agreement
+
+    row = navigability_agreement(sn, points=1500)  # what benchmarks/navmesh_agreement.py reports
+    assert row["points"] > 500 and 0 < row["grid_blocked"] < 0.05
+    assert row["scene_refuses"] == row["start_refused"] == 0.0
+
+
+def test_steps_without_sliding_stop_at_the_wall_along_their_own_line():
+    """habitat-sim's own PathFinderTest.tryStepNoSliding, on van-gogh-room: from random navigable points, ten
+    steps each; every end is navigable and lies along the step (within 1 degree). On an L of squares the
+    contact point is exact, and the Kinematics of a navmesh scene use it when sliding is off."""
+    from ovon.sim.agent import MOVE_FORWARD, Kinematics
+    from ovon.sim.navmesh import load_navmesh
+    from ovon.sim.navmesh.agreement import HABITAT_AGENT
+    from ovon.sim.types import AgentState
+
+    pf = PathFinder(read_navmesh(FIX / "van-gogh-room.navmesh"))
+    rng = np.random.default_rng(0)
+    lo, hi = pf.g.bmin.min(axis=0), pf.g.bmax.max(axis=0)
+    steps = stopped = 0
+    while steps < 800:
+        pos = pf.snap_point(rng.uniform(lo, hi))
+        if not np.isfinite(pos).all():
+            continue
+        a = rng.uniform(-math.pi, math.pi)
+        d = np.array([math.cos(a), 0.0, math.sin(a)]) * 0.25
+        for _ in range(10):
+            end = pf.try_step_no_sliding(pos, pos + d)
+            steps += 1
+            assert pf.is_navigable(end)
+            m = (end - pos)[[0, 2]]
+            if m @ m < 1e-5:
+                stopped += 1
+                break
+            cos = float(m @ d[[0, 2]]) / (np.linalg.norm(m) * 0.25)
+            assert math.degrees(math.acos(min(1.0, cos))) < 1.0
+            pos = end
+    assert stopped > 20  # walls were met
+    pf = PathFinder(make_navmesh([make_tile([rect(0, 0, 3, 1), rect(3, 0, 4, 1), rect(3, 1, 4, 4)])]))
+    assert pf.try_step_no_sliding([1.0, 0.0, 0.5], [1.2, 0.0, 1.5]) == pytest.approx([1.1, 0.0, 1.0], abs=1e-9)
+    assert pf.try_step_no_sliding([2.5, 0.0, 0.5], [3.5, 0.0, 0.7]) == pytest.approx([3.5, 0.0, 0.7], abs=1e-9)
+    sn = load_navmesh(FIX / "van-gogh-room.navmesh", HABITAT_AGENT)
+    cfg = HABITAT_AGENT.__class__(forward_step=0.25, allow_sliding=False)
+    kin = Kinematics(sn.floors[0], cfg, surface=pf)
+    step = kin.step(AgentState(np.array([1.0, 0.0, 0.9]), math.atan2(-0.2, -1.0)), MOVE_FORWARD)  # +z, a bit +x
+    assert step.collided and step.state.position == pytest.approx([1.02, 0.0, 1.0], abs=1e-9)  # stops at the wall

@@ -9,10 +9,11 @@ cells it can reach around the move (`ovon.sim.collision.slide_point`, Detour's m
 grid: the target projected onto the wall it hits).
 Either way the step reports `collided=True`.
 
-On a scene read from a habitat navmesh, a sliding forward move follows the navmesh's polygons instead
-(`surface`: `PathFinder.try_step`, Detour's moveAlongSurface as habitat runs it; it reproduces habitat's
-golden 57-step trajectory to under a micrometre), and it collided when it moved less than asked
-(habitat-lab's rule: squared distances, 1e-5 slack).
+On a scene read from a habitat navmesh, every move (forward, and a noisy turn's drift) follows the navmesh's
+polygons instead (`surface`): with sliding `PathFinder.try_step`, Detour's moveAlongSurface as habitat runs
+it (it reproduces habitat's golden 57-step trajectory to under a micrometre); without, `try_step_no_sliding`,
+straight along the move to the first wall. It collided when it moved less than asked (habitat-lab's rule:
+squared distances, 1e-5 slack).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ class Kinematics:
         self.grid = grid
         self.cfg = cfg
         self.actuation = actuation
-        self.surface = surface  # a navmesh PathFinder: sliding moves follow its polygons
+        self.surface = surface  # a navmesh PathFinder: moves follow its polygons
         self._navigable = np.ascontiguousarray(grid.navigable, dtype=np.bool_)
 
     def step(self, state: AgentState, action: int, rng: np.random.Generator | None = None) -> StepResult:
@@ -102,9 +103,10 @@ class Kinematics:
         return np.array([start[0] + dx * f, start[1], start[2] + dz * f], dtype=np.float64), k == n
 
     def _move(self, start: np.ndarray, dx: float, dz: float) -> tuple[np.ndarray, bool]:
-        if self.surface is not None and self.cfg.allow_sliding:
+        if self.surface is not None:
             target = np.array([start[0] + dx, start[1], start[2] + dz], dtype=np.float64)
-            out = self.surface.try_step(start, target)
+            step = self.surface.try_step if self.cfg.allow_sliding else self.surface.try_step_no_sliding
+            out = step(start, target)
             asked, moved = float(((target - start) ** 2).sum()), float(((out - start) ** 2).sum())
             return out, moved + 1e-5 < asked
         reached, free = self._free_prefix(start, dx, dz)

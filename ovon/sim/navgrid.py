@@ -360,7 +360,17 @@ class SceneNav:
         return self.floors[self.floor_index(xyz)]
 
     def is_navigable(self, xyz) -> bool:
+        """On a scene read from a habitat navmesh, habitat's answer (over a walkable polygon, within 0.5 m of
+        its surface): the grid is a cache of the polygons, and a point habitat calls navigable may fall in a
+        cell the rasterisation left blocked. Elsewhere, the point's cell on its floor's grid."""
+        if self.from_navmesh:
+            return self._finder().is_navigable(xyz)
         return bool(self.floors) and self.grid_for(xyz).is_navigable(xyz)
+
+    def _finder(self):  # noqa: ANN202 - a PathFinder (imported late: ovon.sim.navmesh builds on this module)
+        from ovon.sim.navmesh.pathfind import path_finder
+
+        return path_finder(self.source)
 
     def start_problem(self, xyz) -> str | None:
         """Why an episode may not start at `xyz`, or None: its x, z must be navigable on its floor and its y
@@ -371,9 +381,17 @@ class SceneNav:
         if not self.floors:
             return f"start {shown}: the scene has no navigable floor"
         grid = self.grid_for(p)
-        if not grid.is_navigable(p):
+        if self.from_navmesh:  # the polygons decide, as habitat's is_navigable does; y against their surface
+            from ovon.sim.navmesh.pathfind import on_polygon
+
+            poly, snapped, _ = self._finder().nearest(p)
+            if poly < 0 or not on_polygon(p, snapped):
+                return f"start {shown} is not on a walkable polygon of the navmesh {self.source}"
+            surface = float(snapped[1])
+        elif not grid.is_navigable(p):
             return f"start {shown} is not on the navigable map (floor {grid.floor})"
-        surface = float(grid.cell_to_world(*grid.world_to_cell(p))[1])
+        else:
+            surface = float(grid.cell_to_world(*grid.world_to_cell(p))[1])
         if not abs(p[1] - surface) <= START_HEIGHT_TOLERANCE_M:
             return (
                 f"start {shown} is {p[1] - surface:+.2f} m from its floor's surface (y {surface:.3f} on floor "
@@ -382,6 +400,10 @@ class SceneNav:
         return None
 
     def snap(self, xyz) -> np.ndarray:
+        """The nearest navigable point: habitat's snap_point on a scene read from a navmesh (nan when no polygon
+        lies within its pick box), else the nearest navigable cell centre of the point's floor."""
+        if self.from_navmesh:
+            return self._finder().snap_point(xyz)
         return self.grid_for(xyz).snap(xyz)
 
 

@@ -105,6 +105,30 @@ def trajectory_agreement(
     }
 
 
+def navigability_agreement(sn: SceneNav, points: int = 4000, seed: int = 0) -> dict[str, Any]:
+    """Points habitat calls navigable (uniform over the navmesh's bounds, each lifted onto the surface below,
+    kept when habitat's is_navigable says so): the fraction the scene's grid blocks, and the fraction the
+    scene itself refuses (`sn.is_navigable`, `sn.start_problem`; 0 on a navmesh scene, whose polygons decide)."""
+    from ovon.sim.navmesh.pathfind import path_finder
+
+    pf = path_finder(sn.source)
+    rng = np.random.default_rng(seed)
+    lo, hi = pf.g.bmin.min(axis=0), pf.g.bmax.max(axis=0)
+    kept = []
+    for p in rng.uniform(lo, hi, size=(points, 3)):
+        y = pf.snap_point(p)[1]
+        q = np.array([p[0], y, p[2]])
+        if math.isfinite(y) and pf.is_navigable(q):
+            kept.append(q)
+    n = max(len(kept), 1)
+    return {
+        "points": len(kept),
+        "grid_blocked": sum(not sn.grid_for(q).is_navigable(q) for q in kept) / n,
+        "scene_refuses": sum(not sn.is_navigable(q) for q in kept) / n,
+        "start_refused": sum(sn.start_problem(q) is not None for q in kept) / n,
+    }
+
+
 def topdown_agreement(
     mesh: NavMesh,
     sn: SceneNav,

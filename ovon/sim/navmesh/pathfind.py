@@ -28,9 +28,15 @@ from ovon.sim.navmesh.polys import compute_islands, poly_index, portal_links, ti
 
 POLY_PICK_EXTENT = (2.0, 4.0, 2.0)  # m: half-extents of habitat's findNearestPoly box (PathFinder.cpp)
 MAX_Y_DELTA = 0.5  # m: habitat's is_navigable default
+ON_POLYGON_XZ = 1e-2  # m: habitat's is_navigable: how far (x/z) the snapped point may lie from the point
 H_SCALE = 0.999  # Detour's findPath heuristic scale
 _EPS = 1e-3  # m: Detour's start-on-portal test in findStraightPath
 _EQ = (1.0 / 16384.0) ** 2  # dtVequal
+
+
+def on_polygon(p: np.ndarray, snapped: np.ndarray) -> bool:
+    """Whether a point's snap moved it at most ON_POLYGON_XZ in x/z (habitat's test of being on the mesh)."""
+    return math.hypot(float(p[0] - snapped[0]), float(p[2] - snapped[2])) <= ON_POLYGON_XZ
 
 
 @dataclass
@@ -597,6 +603,71 @@ def _move_along(g_verts, g_nv, link_start, link_edge, link_to, tris, tri_start, 
     return best_pos
 
 
+@njit(cache=True)
+def _clip(p0, p1, verts, nv):  # noqa: ANN001, ANN202 - dtIntersectSegmentPoly2D
+    """(tmin, tmax, exit edge or -1, whether the segment meets the polygon): the segment p0 -> p1 clipped to a
+    convex polygon in x/z; the exit edge j runs from verts[j] to verts[j + 1]."""
+    tmin, tmax, seg_max = 0.0, 1.0, -1
+    dx, dz = p1[0] - p0[0], p1[2] - p0[2]
+    j = nv - 1
+    for i in range(nv):
+        ex, ez = verts[i, 0] - verts[j, 0], verts[i, 2] - verts[j, 2]
+        n = ez * (p0[0] - verts[j, 0]) - ex * (p0[2] - verts[j, 2])
+        d = dz * ex - dx * ez
+        if abs(d) < 1e-8:
+            if n < 0:
+                return tmin, tmax, seg_max, False
+        else:
+            t = n / d
+            if d < 0:
+                if t > tmin:
+                    tmin = t
+                    if tmin > tmax:
+                        return tmin, tmax, seg_max, False
+            elif t < tmax:
+                tmax, seg_max = t, j
+                if tmax < tmin:
+                    return tmin, tmax, seg_max, False
+        j = i
+    return tmin, tmax, seg_max, True
+
+
+@njit(cache=True)
+def _move_straight(g_verts, g_nv, link_start, link_edge, link_to, left, right, tris, tri_start, start_poly, sp, ep):  # noqa: ANN001, ANN202
+    """habitat's try_step_no_sliding: the move goes straight along sp -> ep through the polygons (a Detour
+    raycast) and stops where it first meets a wall, at the contact; then the surface height there."""
+    cur = start_poly
+    t_end = t_in = 0.0  # t_in: where the move entered the current polygon
+    for _ in range(len(g_nv)):
+        _, tmax, edge, ok = _clip(sp, ep, g_verts[cur], g_nv[cur])
+        if not ok:  # rounding at a shared edge: stop where the move entered this polygon
+            t_end = t_in
+            break
+        if edge < 0:  # the end lies in this polygon
+            t_end = 1.0
+            break
+        hx, hz = sp[0] + (ep[0] - sp[0]) * tmax, sp[2] + (ep[2] - sp[2]) * tmax
+        nxt = -1
+        for li in range(link_start[cur], link_start[cur + 1]):
+            if link_edge[li] != edge:
+                continue
+            # a link across a tile border covers part of the edge only: the hit must lie on its portal
+            lx, lz, rx, rz = left[li, 0], left[li, 2], right[li, 0], right[li, 2]
+            seg = (rx - lx) ** 2 + (rz - lz) ** 2
+            s_on = ((hx - lx) * (rx - lx) + (hz - lz) * (rz - lz)) / seg if seg > 0 else 0.0
+            if -1e-4 <= s_on <= 1.0 + 1e-4:
+                nxt = link_to[li]
+                break
+        if nxt < 0:  # a wall: stop at the contact
+            t_end = tmax
+            break
+        cur, t_in, t_end = nxt, tmax, tmax
+    out = sp + (ep - sp) * t_end
+    h = _height(out, tris, tri_start[cur], tri_start[cur + 1])
+    out[1] = sp[1] if np.isnan(h) else h
+    return out
+
+
 # ----------------------------------------------------------------------------------------------
 # the finder
 # ----------------------------------------------------------------------------------------------
@@ -643,10 +714,11 @@ class PathFinder:
         return out if poly >= 0 else np.full(3, np.nan)
 
     def is_navigable(self, xyz, max_y_delta: float = MAX_Y_DELTA) -> bool:
-        """Over a walkable polygon and within `max_y_delta` of its surface (habitat's is_navigable)."""
+        """habitat's is_navigable: the snapped point lies within 1 cm of the point in x/z (over a walkable
+        polygon, or on its rim, where a move stopped by a wall ends) and within `max_y_delta` of it in y."""
         p = np.asarray(xyz, np.float64).reshape(3)
-        poly, out, over = self.nearest(p)
-        return poly >= 0 and over and abs(out[1] - p[1]) <= max_y_delta
+        poly, out, _ = self.nearest(p)
+        return poly >= 0 and on_polygon(p, out) and abs(out[1] - p[1]) <= max_y_delta
 
     def try_step(self, start, end) -> np.ndarray:
         """Where a move from start toward end ends on the navmesh, sliding along walls (habitat's try_step):
@@ -659,6 +731,19 @@ class PathFinder:
         return _move_along(
             g.verts, g.nv, g.link_start, g.link_edge, g.link_to, g.tris, g.tri_start, poly, snapped,
             np.asarray(end, np.float64).reshape(3),
+        )  # fmt: skip
+
+    def try_step_no_sliding(self, start, end) -> np.ndarray:
+        """Where a move from start toward end ends when it may not slide (habitat's try_step_no_sliding): along
+        the move's own line, at the first wall it meets; the start itself when it is on no polygon."""
+        p = np.asarray(start, np.float64).reshape(3)
+        poly, snapped, _ = self.nearest(p)
+        if poly < 0:
+            return p.copy()
+        g = self.g
+        return _move_straight(
+            g.verts, g.nv, g.link_start, g.link_edge, g.link_to, g.link_left, g.link_right, g.tris, g.tri_start,
+            poly, snapped, np.asarray(end, np.float64).reshape(3),
         )  # fmt: skip
 
     def find_path(self, a, b) -> np.ndarray:
