@@ -36,6 +36,14 @@ def register(sub) -> None:
     rep.add_argument("--out", help="report folder (default: <root>/<scale>/reports/<name>)")
     rep.set_defaults(func=cmd_report)
 
+    rr = s.add_parser(
+        "render",
+        help="rewrite report.md of report folders from their report.json with this version's wording "
+        "(numbers unchanged; no run folders needed)",
+    )
+    rr.add_argument("folders", nargs="+", help="report folders, e.g. experiments/results/main")
+    rr.set_defaults(func=cmd_render)
+
     h = s.add_parser(
         "headline",
         help="the README's results tables from the committed reports: print them, rewrite the README's block, "
@@ -146,6 +154,18 @@ def cmd_report(args) -> int:
     )
     path = write_experiment_report(plan, out)
     print(f"report: {path}")
+    return 0
+
+
+def cmd_render(args) -> int:
+    from ovon.experiments.report import load_report, render_report
+
+    for folder in args.folders:  # every folder checked before any report is rewritten
+        if not Path(folder).is_dir():
+            raise ValueError(f"{folder}: not a folder; fix: name a report folder (it holds report.json)")
+        load_report(Path(folder))
+    for folder in args.folders:
+        print(f"report: {render_report(folder)}")
     return 0
 
 

@@ -18,11 +18,18 @@ Lookup = Callable[[str, str], Value | None]  # (ref, metric) -> value, None when
 # {"diff", "ci_low", "ci_high", "p", "mde"}; None when the two did not run the same episodes (or did not run);
 # mde: the SR difference those episodes detect (paired, 95%, 80% power), in % points
 Paired = Callable[[str, str, str], dict | None]
-PAIRED_NOTE = (
+PAIRED_BASE = (
     "paired: the per-episode difference on the episodes both ran, with a 95% bootstrap interval over episodes; "
-    "a comparison holds when its interval excludes 0 in the claimed direction; a verdict of not shown names the "
-    "minimum detectable SR difference (MDE: paired, 95%, 80% power) of those episodes, below which a real "
-    "difference would mostly go unseen"
+    "a comparison holds when its interval excludes 0 in the claimed direction"
+)
+PAIRED_NOTE = (
+    PAIRED_BASE + "; a verdict of not shown names the minimum detectable SR difference (MDE: paired, 95%, 80% "
+    "power) of those episodes, below which a real difference would mostly go unseen"
+)
+# a report written before verdicts named their MDE, rendered again (`ovon experiment render`)
+PAIRED_NOTE_BEFORE_MDE = (
+    PAIRED_BASE + "; this report's paired verdicts were judged before they named their minimum detectable "
+    "difference: the power line under the table gives it for the entries' episode count"
 )
 
 SAME_SEEDS = "‡"

@@ -20,7 +20,15 @@ from ovon.config.base import to_dict
 from ovon.evaluate.results import spread_text
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, Finding, paper_numbers, parse_ref, row_eval
-from ovon.experiments.findings import PAIRED_NOTE, RULE_NOTE, SAME_SEEDS, fill_sentence, judge, same_seeds_lines
+from ovon.experiments.findings import (
+    PAIRED_NOTE,
+    PAIRED_NOTE_BEFORE_MDE,
+    RULE_NOTE,
+    SAME_SEEDS,
+    fill_sentence,
+    judge,
+    same_seeds_lines,
+)
 from ovon.experiments.outputs import last_update
 from ovon.experiments.plan import PERCEPTION
 from ovon.experiments.provenance import (
@@ -442,10 +450,19 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
         parts += [f"![{p}]({p})" for p in figures.get(name, [])] + [""]
         all_findings += exp["findings"]
     if all_findings:
+        unshown = [
+            c["paired"]["verdict"]
+            for f in all_findings
+            for c in f["ours"]["checks"]
+            if c.get("paired") and c["paired"]["verdict"].startswith("not shown")
+        ]
+        paired = any(c.get("paired") for f in all_findings for c in f["ours"]["checks"])
+        note = PAIRED_NOTE if all("MDE" in v for v in unshown) else PAIRED_NOTE_BEFORE_MDE
+        beside = f" Beside it, {note}." if paired else ""  # a report judged before paired checks existed has none
         parts += [
             "## The paper's findings here",
             "",
-            f"Rules on {RULE_NOTE}; the paper's verdict is the same rule on its own numbers. Beside it, {PAIRED_NOTE}.",
+            f"Rules on {RULE_NOTE}; the paper's verdict is the same rule on its own numbers.{beside}",
             "",
             *findings_markdown(all_findings),
             "",
@@ -530,4 +547,51 @@ def write_experiment_report(plan: Plan, out: str | Path) -> Path:
     return out / "report.md"
 
 
-__all__ = ["collect", "write_experiment_report"]
+def report_figures(data: dict, folder: Path) -> dict[str, list[str]]:
+    """The figure list `markdown` links, from the PNGs a report folder holds (the names
+    `write_experiment_report` gives them, in its order)."""
+    figures: dict[str, list[str]] = {}
+    for name, exp in data["experiments"].items():
+        names = [f"{name}_table.png"] if "table" in exp else []
+        names += [f"{fig['name']}.png" for fig in exp["figures"]]
+        figures[name] = [f"figures/{n}" for n in names if (folder / "figures" / n).is_file()]
+    curves = [f"figures/curve_{cid[6:]}.png" for cid in data["cells"] if cid.startswith("train:")]
+    figures["_curves"] = [c for c in curves if (folder / c).is_file()]
+    return figures
+
+
+def render_report(folder: str | Path) -> Path:
+    """Rewrite a report folder's `report.md` from its `report.json` with this version's wording: the numbers
+    are the JSON's, untouched; no run folder is needed (a committed report outlives its runs)."""
+    folder = Path(folder)
+    data = load_report(folder)
+    out = folder / "report.md"
+    atomic_write_text(out, markdown(data, report_figures(data, folder)))
+    return out
+
+
+def load_report(folder: Path) -> dict:
+    """A report folder's `report.json`, checked for what `markdown` reads; one-line ValueError otherwise."""
+    import json
+
+    src = folder / "report.json"
+    try:
+        data = json.loads(src.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ValueError(
+            f"{src}: cannot read it ({e.strerror}); fix: name a folder `ovon experiment report` wrote"
+        ) from None
+    except json.JSONDecodeError as e:
+        raise ValueError(
+            f"{src}: not JSON ({e.msg}, line {e.lineno}); fix: regenerate it with `ovon experiment report`"
+        ) from None
+    need = ("experiments", "scale", "scale_description", "provenance", "cells", "paths", "command")
+    missing = [k for k in need if not isinstance(data, dict) or k not in data]
+    if missing:
+        raise ValueError(
+            f"{src}: no {', '.join(missing)}: expected the JSON `ovon experiment report` writes; fix: regenerate it"
+        )
+    return data
+
+
+__all__ = ["collect", "load_report", "render_report", "write_experiment_report"]
