@@ -10,6 +10,7 @@ from ovon.dataset.io import VAL_SPLITS
 from ovon.evaluate.results import coverage_lines, entry_text, paper_table, selected_records, summarize
 from ovon.reports.labels import agent_label, noise_label
 from ovon.reports.power import mde_sentence
+from ovon.reports.splits import split_spread, spread_lines
 from ovon.task.tracker import FAILURE_LABELS
 
 
@@ -125,6 +126,12 @@ def markdown_report(
             f"Power: {mde_sentence(min(per_seed), sum(srs) / len(srs))} (`ovon compare` measures it for two runs).",
             "",
         ]
+    spreads = [(name, split_spread(recs)) for name, recs in runs]
+    if any(sp for _, sp in spreads):
+        parts += ["## Across splits (SR, one agent's splits against each other)", ""]
+        for name, sp in spreads:
+            if sp:
+                parts += [f"### {name}", "", *spread_lines(sp), ""]
     notes = [f"- {name}, {line}" for (name, _), lines in zip(runs, skipped or []) for line in lines]
     if notes:
         parts += ["Episodes skipped before the run (the numbers above cover the others):", "", *notes, ""]
