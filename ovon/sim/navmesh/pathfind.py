@@ -674,7 +674,9 @@ def _move_straight(g_verts, g_nv, link_start, link_edge, link_to, left, right, t
 
 
 class PathFinder:
-    """Habitat's PathFinder queries on one navmesh: snap, is_navigable, find_path, geodesic_distance."""
+    """Habitat's PathFinder queries on one navmesh: snap, is_navigable, find_path, geodesic_distance. Its
+    queries share scratch arrays (so they allocate nothing): one thread per PathFinder, as env workers are
+    processes."""
 
     def __init__(self, mesh: NavMesh) -> None:
         self.g = poly_graph(mesh)
