@@ -582,7 +582,11 @@ def test_a_training_cell_may_take_another_recipe_and_init_at_a_scale(tmp_path: P
     scale, where the first phase is then no cell at all."""
     cpu = resolve([load_experiment("main")], "cpu", tmp_path)
     assert cpu.cells["train:rl"].deps == ("data:data", "train:rl-warmup")
-    assert "--init" in cpu.cells["train:rl"].commands[0] and cpu.cells["train:rl"].train_cfg.max_updates == 300
+    assert "--init" in cpu.cells["train:rl"].commands[0] and "--init" not in cpu.cells["train:rl-warmup"].commands[0]
+    continued = "--set max_updates=" + str(cpu.cells["train:rl"].train_cfg.max_updates)
+    assert cpu.cells["train:rl"].train_cfg.max_updates != cpu.cells["train:rl-warmup"].train_cfg.max_updates
+    memory = resolve([load_experiment("memory")], "cpu", tmp_path)
+    assert continued in " ".join(memory.cells["train:rl-lstm"].commands[0])
     paper = resolve([load_experiment("main")], "paper", tmp_path)
     assert paper.cells["train:rl"].deps == ("data:data",) and "train:rl-warmup" not in paper.cells
     assert "--init" not in paper.cells["train:rl"].commands[0]
