@@ -47,3 +47,24 @@ def test_render_refuses_what_is_not_a_report_before_rewriting_any(tmp_path, caps
     (bad / "report.json").write_text("{")
     with pytest.raises(ValueError, match="not JSON"):
         render_report(bad)
+
+
+def test_a_report_from_before_the_seed_check_drops_only_a_std_that_is_zero_on_both_metrics(tmp_path):
+    """The -oracle reports predate `seeds_identical`: an entry whose SR and SPL stds are both 0 over 2+ seeds
+    renders without "± 0.0"; one whose SPL still varies keeps its ± (its SR std is a coincidence of counts)."""
+    folder = tmp_path / "main-oracle"
+    shutil.copytree(RESULTS / "main-oracle", folder)
+    data = json.loads((folder / "report.json").read_text())
+    rows = data["experiments"]["main"]["table"]["rows"]
+    assert not any("seeds_identical" in (c["ours"] or {}) for r in rows for c in r["cells"].values())
+    md = render_report(folder).read_text()
+    line = {r["name"]: next(x for x in md.splitlines() if x.startswith(f"| {r['name']} |")) for r in rows}
+    for row in rows:
+        for cell in row["cells"].values():
+            (sr, sr_sd), (_, spl_sd), seeds = cell["ours"]["sr"], cell["ours"]["spl"], cell["ours"]["seeds"]
+            agree = seeds >= 2 and sr_sd == 0 and spl_sd == 0
+            assert (f"**{sr:.1f}‡**" in line[row["name"]]) == agree
+            if not agree:
+                assert f"**{sr:.1f} ± {sr_sd:.1f}**" in line[row["name"]]
+    assert any(c["ours"]["sr"][1] == 0 and c["ours"]["spl"][1] > 0 for r in rows for c in r["cells"].values())
+    assert "‡ every evaluation seed ran each episode to the same end" in md

@@ -591,7 +591,21 @@ def load_report(folder: Path) -> dict:
         raise ValueError(
             f"{src}: no {', '.join(missing)}: expected the JSON `ovon experiment report` writes; fix: regenerate it"
         )
+    _mark_agreeing_seeds(data)
     return data
+
+
+def _mark_agreeing_seeds(data: dict) -> None:
+    """Reports written before entries recorded `seeds_identical` print a deterministic agent as "± 0.0";
+    an entry of 2+ seeds whose SR and SPL both have a std of exactly 0 is what identical seeds give, so it
+    is marked as such and renders without the ± (entries that record the check keep theirs)."""
+    for exp in data["experiments"].values():
+        for row in ((exp or {}).get("table") or {}).get("rows", []):
+            for cell in row.get("cells", {}).values():
+                ours = cell.get("ours")
+                if not ours or "seeds_identical" in ours or ours.get("seeds", 2) < 2:
+                    continue
+                ours["seeds_identical"] = all(ours.get(m, [0, 1])[1] == 0 for m in ("sr", "spl"))
 
 
 __all__ = ["collect", "load_report", "render_report", "write_experiment_report"]
