@@ -652,6 +652,7 @@ def test_main_at_tiny_scale_end_to_end(tmp_path: Path) -> None:
     assert again.ok and all(c.startswith("eval:") for c in again.ran) and again.ran
     text = (tmp_path / "tiny" / "reports" / "main" / "report.md").read_text()
     assert "x 3 seeds per entry" in text
+    assert "  - episodes: **" in text and "a rule across splits (flat, drop)" in text  # finding (d)'s intervals
     redone = run(more, redo_cells=["train:bc"], console=quiet())  # BC, BC->RL and their evaluations again
     assert sorted(redone.ran) == ["eval:bc", "eval:bcrl", "train:bc", "train:bcrl"]
     assert (tmp_path / "tiny" / "train" / "bc.old-1" / "policy.pt").is_file()

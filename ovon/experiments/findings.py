@@ -18,6 +18,9 @@ Lookup = Callable[[str, str], Value | None]  # (ref, metric) -> value, None when
 # {"diff", "ci_low", "ci_high", "p", "mde"}; None when the two did not run the same episodes (or did not run);
 # mde: the SR difference those episodes detect (paired, 95%, 80% power), in % points
 Paired = Callable[[str, str, str], dict | None]
+# refs -> `ovon.reports.splits.split_spread` over those entries' episodes, each ref one group (so its "splits"
+# and "pairs" name refs); None when any has not run. For rules over entries on different episodes (splits).
+Spread = Callable[[tuple[str, ...]], dict | None]
 PAIRED_BASE = (
     "paired: the per-episode difference on the episodes both ran, with a 95% bootstrap interval over episodes; "
     "a comparison holds when its interval excludes 0 in the claimed direction"
@@ -30,6 +33,12 @@ PAIRED_NOTE = (
 PAIRED_NOTE_BEFORE_MDE = (
     PAIRED_BASE + "; this report's paired verdicts were judged before they named their minimum detectable "
     "difference: the power line under the table gives it for the entries' episode count"
+)
+
+INTERVAL_NOTE = (
+    "a rule across splits (flat, drop) compares entries on different episodes: its interval verdict gives the "
+    "gap with a 95% bootstrap interval, each entry's episodes resampled on their own (unpaired, an episode's "
+    "seeds together)"
 )
 
 SAME_SEEDS = "‡"
@@ -106,6 +115,46 @@ def paired_check(chk: Check, paired: Paired | None) -> dict | None:
     return {"verdict": verdict, "numbers": numbers}
 
 
+def _gap(result: dict, a: str, b: str) -> tuple[float, float, float]:
+    """SR(a) - SR(b) and its interval in % points from a `split_spread` result (its pairs are ordered high-low)."""
+    p = next(p for p in result["pairs"] if {p["a"], p["b"]} == {a, b})
+    d, lo, hi = 100 * p["diff"], 100 * p["ci"][0], 100 * p["ci"][1]
+    return (d, lo, hi) if p["a"] == a else (-d, -hi, -lo)
+
+
+def interval_check(chk: Check, spread: Spread | None) -> dict | None:
+    """The episode-interval verdict of a `flat` / `drop` check, whose entries ran different episodes (splits),
+    so the gap is unpaired: `flat` holds when the largest gap's interval lies at or below the tolerance and does
+    not when it lies above; `drop` holds when every drop's interval lies at or above it and does not when one
+    lies below; otherwise not shown. None for other kinds or where an entry has no episodes."""
+    if spread is None or chk.kind not in ("flat", "drop"):
+        return None
+    tol = chk.tolerance
+    if chk.kind == "flat":
+        res = spread(tuple(chk.refs))
+        if res is None:
+            return None
+        sp = res["spread"]
+        d, lo, hi = _gap(res, sp["a"], sp["b"])
+        unshown = f"not shown (the interval includes {tol:g})"
+        verdict = "holds" if hi <= tol else "does not hold" if lo > tol else unshown
+        return {"verdict": verdict, "numbers": f"largest gap {sp['a']} - {sp['b']} {d:+.1f} [{lo:+.1f}, {hi:+.1f}]"}
+    gaps = []
+    for a, b in chk.pairs:
+        res = spread((a, b))
+        if res is None:
+            return None
+        gaps.append((a, b, *_gap(res, a, b)))
+    if all(lo >= tol for *_, lo, _ in gaps):
+        verdict = "holds"
+    elif any(hi < tol for *_, hi in gaps):
+        verdict = "does not hold"
+    else:
+        verdict = f"not shown (an interval includes {tol:g})"
+    numbers = "; ".join(f"{a} - {b} {d:+.1f} [{lo:+.1f}, {hi:+.1f}]" for a, b, d, lo, hi in gaps)
+    return {"verdict": verdict, "numbers": numbers}
+
+
 def interval_text(st: dict) -> str:
     """A paired difference as the reports print it: '+6.0 [+1.8, +10.5]'."""
     return f"{st['diff']:+.1f} [{st['ci_low']:+.1f}, {st['ci_high']:+.1f}]"
@@ -154,7 +203,7 @@ def fill_sentence(text: str, look: Lookup, paired: Paired | None = None) -> str:
     return _SENTENCE_REF.sub(value, text)
 
 
-def judge_check(chk: Check, look: Lookup, paired: Paired | None = None) -> dict:
+def judge_check(chk: Check, look: Lookup, paired: Paired | None = None, spread: Spread | None = None) -> dict:
     """{"verdict": holds | does not hold | not run, "within_noise": bool, "numbers": text}."""
     refs = {r for r in (chk.target, *chk.others, *chk.refs, *(x for p in (*chk.pairs, *chk.against) for x in p)) if r}
     values = {r: look(r, chk.metric) for r in refs}
@@ -172,11 +221,11 @@ def judge_check(chk: Check, look: Lookup, paired: Paired | None = None) -> dict:
         numbers = "; ".join(f"{show(a)} vs {show(b)}" for a, b in pairs)
     elif chk.kind == "flat":
         means = [v[r][0] for r in chk.refs]
-        spread = max(means) - min(means)
-        holds = spread <= chk.tolerance
+        width = max(means) - min(means)
+        holds = width <= chk.tolerance
         hi, lo = max(chk.refs, key=lambda r: v[r][0]), min(chk.refs, key=lambda r: v[r][0])
-        noisy = abs(spread - chk.tolerance) < v[hi][1] + v[lo][1]
-        numbers = ", ".join(show(r) for r in chk.refs) + f" (spread {spread:.1f})"
+        noisy = abs(width - chk.tolerance) < v[hi][1] + v[lo][1]
+        numbers = ", ".join(show(r) for r in chk.refs) + f" (spread {width:.1f})"
     elif chk.kind == "drop":
         drops = [(v[a][0] - v[b][0], v[a][1] + v[b][1]) for a, b in chk.pairs]
         oks = [d >= chk.tolerance for d, _ in drops]
@@ -197,13 +246,17 @@ def judge_check(chk: Check, look: Lookup, paired: Paired | None = None) -> dict:
     pv = paired_check(chk, paired)
     if pv is not None:
         out["paired"] = pv
+    iv = interval_check(chk, spread)
+    if iv is not None:
+        out["interval"] = iv
     return out
 
 
-def judge(finding: Finding, look: Lookup, paired: Paired | None = None) -> dict:
+def judge(finding: Finding, look: Lookup, paired: Paired | None = None, spread: Spread | None = None) -> dict:
     """A finding holds when every check holds; "not run" when any check lacks numbers. Checks that compare runs
-    on the same episodes also get a paired verdict (`paired_check`) beside the two-std rule."""
-    checks = [{"rule": rule_text(c), **judge_check(c, look, paired)} for c in finding.checks]
+    on the same episodes also get a paired verdict (`paired_check`), checks across splits an unpaired interval
+    verdict (`interval_check`), beside the two-std rule."""
+    checks = [{"rule": rule_text(c), **judge_check(c, look, paired, spread)} for c in finding.checks]
     verdicts = {c["verdict"] for c in checks}
     verdict = "not run" if "not run" in verdicts else ("does not hold" if "does not hold" in verdicts else "holds")
     noisy = verdict != "not run" and _deciding(

@@ -77,7 +77,12 @@ def _verdict(found: dict | None) -> str:
         return "–"
     text = found["verdict"] + (" (within noise)" if found.get("within_noise") else "")
     paired = [c["paired"]["verdict"] for c in found.get("checks", []) if c.get("paired")]
-    return text + (f"; paired: {', '.join(paired)}" if paired else "")
+    episodes = [c["interval"]["verdict"] for c in found.get("checks", []) if c.get("interval")]
+    return (
+        text
+        + (f"; paired: {', '.join(paired)}" if paired else "")
+        + (f"; episodes: {', '.join(episodes)}" if episodes else "")
+    )
 
 
 def findings(results: Path) -> list[str]:

@@ -21,6 +21,7 @@ from ovon.evaluate.results import spread_text
 from ovon.experiments.cells import Cell, EvalRun, Plan, render_value
 from ovon.experiments.definitions import Experiment, Finding, paper_numbers, parse_ref, row_eval
 from ovon.experiments.findings import (
+    INTERVAL_NOTE,
     PAIRED_NOTE,
     PAIRED_NOTE_BEFORE_MDE,
     RULE_NOTE,
@@ -243,11 +244,14 @@ def experiment_results(exp: Experiment, evals: dict[str, dict], scale: str) -> d
             evals, entries[parse_ref(ref_a, exp.source)], entries[parse_ref(ref_b, exp.source)], metric
         )
 
+    def spread(refs: tuple[str, ...]) -> dict | None:
+        return split_gaps(evals, {r: entries[parse_ref(r, exp.source)] for r in refs})
+
     def fill(text: str) -> str:
         return fill_sentence(text, look("ours"), paired)
 
     res["findings"] = [
-        finding_result(f, judge(f, look("ours"), paired), judge(f, look("paper")), scale, exp.source, fill)
+        finding_result(f, judge(f, look("ours"), paired, spread), judge(f, look("paper")), scale, exp.source, fill)
         for f in exp.findings
     ]
     return res
@@ -290,6 +294,20 @@ def paired_difference(evals: dict[str, dict], a: dict, b: dict, metric: str) -> 
         "p": result.sign.p_value,
         "mde": 100 * result.mde,  # SR's, whatever the metric: the finding's verdict names it
     }
+
+
+def split_gaps(evals: dict[str, dict], entries: dict[str, dict]) -> dict | None:
+    """`ovon.reports.splits.split_spread` over table entries' episodes, each entry (ref) one group; None when
+    any has no episode records."""
+    from ovon.reports.splits import split_spread
+
+    records = []
+    for ref, e in entries.items():
+        mine = [r for r in evals[e["eval"]].get("records") or [] if r["split"] == e["split"]]
+        if not mine:
+            return None
+        records += [{**r, "split": ref} for r in mine]
+    return split_spread(records)
 
 
 def run_command_line(plan: Plan) -> str:
@@ -419,6 +437,8 @@ def findings_markdown(findings: list[dict]) -> list[str]:
             lines.append(f"  - rule: {c['rule']}; ours: {c['numbers']}")
             if c.get("paired"):
                 lines.append(f"  - paired: **{c['paired']['verdict']}**: {c['paired']['numbers']}")
+            if c.get("interval"):
+                lines.append(f"  - episodes: **{c['interval']['verdict']}**: {c['interval']['numbers']}")
         if "differs" in f:
             lines.append(f"  - why it differs from the paper's: {f['differs']}")
         if f["note"]:
@@ -459,6 +479,8 @@ def markdown(data: dict, figures: dict[str, list[str]]) -> str:
         paired = any(c.get("paired") for f in all_findings for c in f["ours"]["checks"])
         note = PAIRED_NOTE if all("MDE" in v for v in unshown) else PAIRED_NOTE_BEFORE_MDE
         beside = f" Beside it, {note}." if paired else ""  # a report judged before paired checks existed has none
+        if any(c.get("interval") for f in all_findings for c in f["ours"]["checks"]):
+            beside += f" And {INTERVAL_NOTE}."
         parts += [
             "## The paper's findings here",
             "",
