@@ -135,7 +135,7 @@ def interval_check(chk: Check, spread: Spread | None) -> dict | None:
         if res is None:
             return None
         sp = res["spread"]
-        d, lo, hi = _gap(res, sp["a"], sp["b"])
+        d, (lo, hi) = 100 * sp["diff"], (100 * x for x in sp["ci"])  # the largest gap, high minus low
         unshown = f"not shown (the interval includes {tol:g})"
         verdict = "holds" if hi <= tol else "does not hold" if lo > tol else unshown
         return {"verdict": verdict, "numbers": f"largest gap {sp['a']} - {sp['b']} {d:+.1f} [{lo:+.1f}, {hi:+.1f}]"}
